@@ -1,0 +1,1 @@
+//! engagement_classifier (in progress)

@@ -1,0 +1,110 @@
+//! Writes the suite's figures. Plots are drawn once as SVG (plotters' SVG backend needs no
+//! fonts); the PNG beside it is rendered from that SVG with resvg and the system fonts, so the
+//! two files always show the same picture.
+
+use std::path::{Path, PathBuf};
+
+/// Why a figure could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    #[error("the SVG for {path} does not parse: {reason}")]
+    BadSvg { path: PathBuf, reason: String },
+    #[error("cannot allocate a {width}x{height} pixmap for {path}")]
+    Pixmap {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+    },
+    #[error("encoding {path} as PNG: {reason}")]
+    Png { path: PathBuf, reason: String },
+    #[error("writing {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Renders an SVG document to PNG bytes at `scale` (1.0 = the SVG's own size).
+pub fn svg_to_png(svg: &str, scale: f32, name_for_errors: &Path) -> Result<Vec<u8>, FigureError> {
+    let mut options = resvg::usvg::Options::default();
+    options.fontdb_mut().load_system_fonts();
+    // plotters names "sans-serif"; make sure it resolves to an installed face.
+    options.font_family = "DejaVu Sans".to_string();
+    let tree = resvg::usvg::Tree::from_str(svg, &options).map_err(|e| FigureError::BadSvg {
+        path: name_for_errors.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let size = tree
+        .size()
+        .to_int_size()
+        .scale_by(scale)
+        .ok_or(FigureError::Pixmap {
+            path: name_for_errors.to_path_buf(),
+            width: 0,
+            height: 0,
+        })?;
+    let mut pixmap =
+        resvg::tiny_skia::Pixmap::new(size.width(), size.height()).ok_or(FigureError::Pixmap {
+            path: name_for_errors.to_path_buf(),
+            width: size.width(),
+            height: size.height(),
+        })?;
+    pixmap.fill(resvg::tiny_skia::Color::WHITE);
+    resvg::render(
+        &tree,
+        resvg::tiny_skia::Transform::from_scale(scale, scale),
+        &mut pixmap.as_mut(),
+    );
+    pixmap.encode_png().map_err(|e| FigureError::Png {
+        path: name_for_errors.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// Writes `<stem>.svg` and `<stem>.png` and returns both paths. Each file is written to a
+/// temporary name first and renamed, so a reader never sees half a figure.
+pub fn write_svg_and_png(stem: &Path, svg: &str) -> Result<(PathBuf, PathBuf), FigureError> {
+    let svg_path = stem.with_extension("svg");
+    let png_path = stem.with_extension("png");
+    write_atomically(&svg_path, svg.as_bytes())?;
+    let png = svg_to_png(svg, 1.5, &png_path)?;
+    write_atomically(&png_path, &png)?;
+    Ok((svg_path, png_path))
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FigureError> {
+    let io = |source| FigureError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let tmp = path.with_extension(format!(
+        "{}.tmp",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
+    ));
+    std::fs::write(&tmp, bytes).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn renders_text_and_shapes_to_png() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="120" height="40">
+            <rect x="0" y="0" width="60" height="40" fill="red"/>
+            <text x="65" y="25" font-family="sans-serif" font-size="14">E|L</text></svg>"#;
+        let png = svg_to_png(svg, 1.0, Path::new("t.png")).expect("renders");
+        assert_eq!(&png[1..4], b"PNG");
+        assert!(png.len() > 100);
+    }
+
+    #[test]
+    fn bad_svg_is_a_named_error() {
+        let err = svg_to_png("<svg", 1.0, Path::new("broken.png")).unwrap_err();
+        assert!(err.to_string().contains("broken.png"), "{err}");
+    }
+}
