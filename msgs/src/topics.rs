@@ -1,0 +1,150 @@
+//! The suite's topic and service names with their types and QoS, in one table, so every node,
+//! the recorder and the README agree. Robot output uses QTrobot's own topic names.
+
+use crate::definition::MessageDefinition;
+use crate::messages::*;
+use crate::services::{AssignCluster, DecideAction, PredictUser, ServiceDefinition};
+use crate::standard::std_msgs::StringMsg;
+use std::marker::PhantomData;
+
+/// How a topic is delivered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum QosKind {
+    /// Commands, results, decisions: reliable, volatile, keep last 100.
+    Reliable,
+    /// Latest state: reliable, transient-local, keep last 1 (late joiners get it).
+    State,
+    /// High-rate sensor data: best effort, volatile, keep last 10.
+    Features,
+}
+
+impl QosKind {
+    pub fn describe(self) -> &'static str {
+        match self {
+            QosKind::Reliable => "reliable, volatile, keep last 100",
+            QosKind::State => "reliable, transient-local, keep last 1",
+            QosKind::Features => "best effort, volatile, keep last 10",
+        }
+    }
+}
+
+/// A typed topic of the suite.
+#[derive(Debug)]
+pub struct Topic<M> {
+    pub name: &'static str,
+    pub qos: QosKind,
+    message: PhantomData<fn() -> M>,
+}
+
+impl<M> Clone for Topic<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for Topic<M> {}
+
+impl<M: MessageDefinition> Topic<M> {
+    pub const fn new(name: &'static str, qos: QosKind) -> Self {
+        Topic {
+            name,
+            qos,
+            message: PhantomData,
+        }
+    }
+
+    pub fn info(&self) -> TopicInfo {
+        TopicInfo {
+            name: self.name,
+            type_name: M::full_type_name(),
+            package: M::PACKAGE,
+            type_short_name: M::NAME,
+            schema_text: M::schema_text(),
+            qos: self.qos,
+        }
+    }
+}
+
+/// A typed service of the suite.
+#[derive(Debug)]
+pub struct Service<S> {
+    pub name: &'static str,
+    service: PhantomData<fn() -> S>,
+}
+
+impl<S> Clone for Service<S> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<S> Copy for Service<S> {}
+
+impl<S: ServiceDefinition> Service<S> {
+    pub const fn new(name: &'static str) -> Self {
+        Service {
+            name,
+            service: PhantomData,
+        }
+    }
+}
+
+/// A topic's description without its Rust type, for the recorder and the docs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicInfo {
+    pub name: &'static str,
+    /// `pkg/msg/Type`
+    pub type_name: String,
+    pub package: &'static str,
+    pub type_short_name: &'static str,
+    pub schema_text: String,
+    pub qos: QosKind,
+}
+
+pub const OPENFACE_FEATURES: Topic<OpenFaceFeatures> =
+    Topic::new("/qt_therapy/openface/features", QosKind::Features);
+pub const ENGAGEMENT_ESTIMATE: Topic<EngagementEstimate> =
+    Topic::new("/qt_therapy/engagement/estimate", QosKind::Features);
+pub const EXPECTED_ENGAGEMENT: Topic<ExpectedEngagement> =
+    Topic::new("/qt_therapy/engagement/expected", QosKind::Reliable);
+pub const THERAPIST_COMMAND: Topic<TherapistCommand> =
+    Topic::new("/qt_therapy/therapist/command", QosKind::Reliable);
+pub const GAME_STATE: Topic<GameState> = Topic::new("/qt_therapy/game/state", QosKind::State);
+pub const SEQUENCE_RESULT: Topic<SequenceResult> =
+    Topic::new("/qt_therapy/game/sequence_result", QosKind::Reliable);
+pub const TABLET_TASK: Topic<TabletTask> = Topic::new("/qt_therapy/tablet/task", QosKind::State);
+pub const TABLET_ANSWER: Topic<TabletAnswer> =
+    Topic::new("/qt_therapy/tablet/answer", QosKind::Reliable);
+pub const DECISION: Topic<Decision> = Topic::new("/qt_therapy/policy/decision", QosKind::Reliable);
+pub const USER_MODEL_INFO: Topic<UserModelInfo> =
+    Topic::new("/qt_therapy/user_model/models", QosKind::State);
+pub const HEARTBEAT: Topic<Heartbeat> = Topic::new("/qt_therapy/heartbeat", QosKind::Reliable);
+/// QTrobot's text-to-speech.
+pub const ROBOT_SPEECH: Topic<StringMsg> = Topic::new("/qt_robot/speech/say", QosKind::Reliable);
+/// QTrobot's face animation, e.g. `QT/happy`.
+pub const ROBOT_EMOTION: Topic<StringMsg> = Topic::new("/qt_robot/emotion/show", QosKind::Reliable);
+/// QTrobot's recorded gestures, e.g. `QT/happy`.
+pub const ROBOT_GESTURE: Topic<StringMsg> = Topic::new("/qt_robot/gesture/play", QosKind::Reliable);
+
+pub const PREDICT_USER: Service<PredictUser> = Service::new("/qt_therapy/user_model/predict");
+pub const ASSIGN_CLUSTER: Service<AssignCluster> =
+    Service::new("/qt_therapy/user_model/assign_cluster");
+pub const DECIDE_ACTION: Service<DecideAction> = Service::new("/qt_therapy/policy/decide_action");
+
+/// Every topic of the suite, for the recorder (`bag record --all`) and the docs.
+pub fn all_topics() -> Vec<TopicInfo> {
+    vec![
+        OPENFACE_FEATURES.info(),
+        ENGAGEMENT_ESTIMATE.info(),
+        EXPECTED_ENGAGEMENT.info(),
+        THERAPIST_COMMAND.info(),
+        GAME_STATE.info(),
+        SEQUENCE_RESULT.info(),
+        TABLET_TASK.info(),
+        TABLET_ANSWER.info(),
+        DECISION.info(),
+        USER_MODEL_INFO.info(),
+        HEARTBEAT.info(),
+        ROBOT_SPEECH.info(),
+        ROBOT_EMOTION.info(),
+        ROBOT_GESTURE.info(),
+    ]
+}

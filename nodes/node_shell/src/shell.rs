@@ -1,0 +1,508 @@
+//! The DDS side of every node: builds the RustDDS participant (domain id and localhost-only
+//! from the ROS 2 environment variables), the ros2-client node and its spinner, typed
+//! publishers, validated subscriptions and services over channels, a heartbeat, and a clean
+//! exit on SIGINT/SIGTERM. Node logic never sees any of this: it gets messages from channels.
+
+use crate::drops::DropLog;
+use crate::logging::init_logging;
+use crate::params::{parameters_from_map, read_parameter_map};
+use anyhow::{Context as _, bail};
+use qt_therapy_msgs::services::ServiceDefinition;
+use qt_therapy_msgs::topics::{QosKind, Service, Topic, HEARTBEAT};
+use qt_therapy_msgs::{Heartbeat, InvalidMessage, MessageDefinition, Validate, dds_type_name};
+use ros2_client::qos::{Durability, History, Reliability, WhenFull};
+use ros2_client::{
+    Context, Message, Name, Node, NodeName, NodeOptions, QosProfile, ServiceMapping,
+    ServiceTypeName,
+};
+use serde::de::DeserializeOwned;
+use std::net::{IpAddr, Ipv4Addr};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{mpsc, oneshot, watch};
+
+/// Command-line options every node accepts (flatten into the node's clap struct).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ShellOptions {
+    /// ROS 2 parameter file [default: $QT_PARAMS_DIR/<node>.yaml, else params/<node>.yaml]
+    #[arg(long)]
+    pub params_file: Option<PathBuf>,
+    /// Node name on the ROS graph; also the section read from the parameter file.
+    #[arg(long)]
+    pub node_name: Option<String>,
+    /// Node namespace.
+    #[arg(long, default_value = "/")]
+    pub namespace: String,
+    /// Service mapping: `enhanced` talks to rmw_fastrtps peers, `cyclone` to rmw_cyclonedds.
+    #[arg(long, env = "QT_SERVICE_MAPPING", default_value = "enhanced")]
+    pub service_mapping: String,
+}
+
+impl ShellOptions {
+    /// The parameter file this node reads.
+    pub fn params_path(&self, node_name: &str) -> PathBuf {
+        if let Some(p) = &self.params_file {
+            return p.clone();
+        }
+        match std::env::var_os("QT_PARAMS_DIR") {
+            Some(dir) => PathBuf::from(dir).join(format!("{node_name}.yaml")),
+            None => PathBuf::from("params").join(format!("{node_name}.yaml")),
+        }
+    }
+}
+
+/// ROS_DOMAIN_ID, 0 when unset; values outside 0..=232 are an error.
+pub fn domain_id_from_env() -> anyhow::Result<u16> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(s) if s.trim().is_empty() => Ok(0),
+        Ok(s) => match s.trim().parse::<u16>() {
+            Ok(d) if d <= 232 => Ok(d),
+            _ => bail!("ROS_DOMAIN_ID={s:?} is not a domain id in 0..=232"),
+        },
+    }
+}
+
+/// True when ROS_LOCALHOST_ONLY=1 or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
+pub fn localhost_only_from_env() -> bool {
+    std::env::var("ROS_LOCALHOST_ONLY").is_ok_and(|v| v.trim() == "1")
+        || std::env::var("ROS_AUTOMATIC_DISCOVERY_RANGE")
+            .is_ok_and(|v| v.trim().eq_ignore_ascii_case("LOCALHOST"))
+}
+
+/// The QoS a topic class gets, the same on both sides.
+pub fn qos_profile(kind: QosKind) -> QosProfile {
+    let reliable = Reliability::Reliable {
+        when_full: WhenFull::Wait(Duration::from_millis(100)),
+    };
+    match kind {
+        QosKind::Reliable => QosProfile::publisher_default()
+            .reliability(reliable)
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: 100 }),
+        QosKind::State => QosProfile::publisher_default()
+            .reliability(reliable)
+            .durability(Durability::TransientLocal)
+            .history(History::KeepLast { depth: 1 }),
+        QosKind::Features => QosProfile::subscription_default()
+            .reliability(Reliability::BestEffort)
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: 10 }),
+    }
+}
+
+fn service_qos() -> QosProfile {
+    qos_profile(QosKind::Reliable).history(History::KeepLast { depth: 10 })
+}
+
+fn ros_name(full: &str) -> anyhow::Result<Name> {
+    let (ns, base) = match full.rsplit_once('/') {
+        Some(("", base)) => ("/", base),
+        Some((ns, base)) => (ns, base),
+        None => ("/", full),
+    };
+    Name::new(ns, base).map_err(|e| anyhow::anyhow!("{full:?} is not a ROS name: {e:?}"))
+}
+
+/// A running node: its ros2-client node, shutdown signal and the helpers that move messages.
+pub struct NodeShell {
+    node: Node,
+    name: String,
+    service_mapping: ServiceMapping,
+    drops: Arc<DropLog>,
+    shutdown: watch::Receiver<bool>,
+    // Tasks that own DDS entities: stopped before the participant goes, so RustDDS can
+    // remove them cleanly.
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+    // Kept so the DDS participant outlives every entity created from it.
+    _context: Context,
+}
+
+impl NodeShell {
+    /// Sets up logging, reads the node's parameter file into `P`, and joins the ROS 2 graph.
+    /// Must run inside a tokio runtime.
+    pub fn start<P: DeserializeOwned>(
+        default_name: &str,
+        options: &ShellOptions,
+    ) -> anyhow::Result<(NodeShell, P)> {
+        let name = options
+            .node_name
+            .clone()
+            .unwrap_or_else(|| default_name.to_string());
+        let sink = init_logging(&name);
+        let params_path = options.params_path(&name);
+        let map = read_parameter_map(&params_path, &name)?;
+        let params: P = parameters_from_map(map, &params_path, &name)?;
+        let service_mapping = match options.service_mapping.to_ascii_lowercase().as_str() {
+            "enhanced" => ServiceMapping::Enhanced,
+            "cyclone" => ServiceMapping::Cyclone,
+            "basic" => ServiceMapping::Basic,
+            other => bail!("--service-mapping {other:?} is not enhanced, cyclone or basic"),
+        };
+        let domain = domain_id_from_env()?;
+        let mut builder = rustdds::DomainParticipantBuilder::new(domain);
+        let localhost = localhost_only_from_env();
+        if localhost {
+            builder = builder.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+        }
+        let participant = builder
+            .build()
+            .with_context(|| format!("creating the DDS participant in domain {domain}"))?;
+        let context = Context::from_domain_participant(participant)
+            .context("creating the ros2-client context")?;
+        let node_name = NodeName::new(&options.namespace, &name)
+            .map_err(|e| anyhow::anyhow!("{name:?} in {:?} is not a node name: {e:?}", options.namespace))?;
+        let mut node = context
+            .new_node(node_name, NodeOptions::new().enable_rosout(true))
+            .with_context(|| format!("creating node {name}"))?;
+        let spinner = node.spinner().context("starting the node's spinner")?;
+        let spinner_task = tokio::spawn(async move {
+            if let Err(e) = spinner.spin().await {
+                tracing::error!("ros2-client spinner stopped: {e:?}");
+            }
+        });
+        sink.attach(node.logging_handle());
+        let shutdown = spawn_signal_listener()?;
+        tracing::info!(
+            node = %name,
+            domain,
+            localhost_only = localhost,
+            params = %params_path.display(),
+            "node started"
+        );
+        let mut shell = NodeShell {
+            node,
+            name,
+            service_mapping,
+            drops: Arc::new(DropLog::default()),
+            shutdown,
+            tasks: vec![spinner_task],
+            _context: context,
+        };
+        shell.start_heartbeat()?;
+        Ok((shell, params))
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The underlying ros2-client node, for what the shell does not wrap (the bag recorder's
+    /// untyped subscriptions).
+    pub fn node_mut(&mut self) -> &mut Node {
+        &mut self.node
+    }
+
+    /// Counts of dropped input, per topic and reason.
+    pub fn drops(&self) -> Arc<DropLog> {
+        self.drops.clone()
+    }
+
+    /// A publisher on one of the suite's topics.
+    pub fn publisher<M: MessageDefinition + Message>(
+        &mut self,
+        topic: Topic<M>,
+    ) -> anyhow::Result<Outbox<M>> {
+        let qos = qos_profile(topic.qos);
+        let dds_topic = self
+            .node
+            .create_topic(&ros_name(topic.name)?, dds_type_name::<M>(), &qos)
+            .with_context(|| format!("creating topic {}", topic.name))?;
+        let publisher = self
+            .node
+            .create_publisher::<M>(&dds_topic, Some(qos))
+            .with_context(|| format!("creating a publisher on {}", topic.name))?;
+        Ok(Outbox {
+            publisher,
+            topic: topic.name,
+        })
+    }
+
+    /// A subscription whose decoded, validated messages arrive on the returned channel.
+    /// Undecodable or invalid messages are logged once per topic and reason, and dropped.
+    pub fn subscribe<M>(&mut self, topic: Topic<M>, capacity: usize) -> anyhow::Result<mpsc::Receiver<M>>
+    where
+        M: MessageDefinition + Message + Validate,
+    {
+        let qos = qos_profile(topic.qos);
+        let dds_topic = self
+            .node
+            .create_topic(&ros_name(topic.name)?, dds_type_name::<M>(), &qos)
+            .with_context(|| format!("creating topic {}", topic.name))?;
+        let subscription = self
+            .node
+            .create_subscription::<M>(&dds_topic, Some(qos))
+            .with_context(|| format!("subscribing to {}", topic.name))?;
+        let (tx, rx) = mpsc::channel(capacity.max(1));
+        let drops = self.drops.clone();
+        let name = topic.name;
+        self.tasks.push(tokio::spawn(async move {
+            loop {
+                match subscription.async_take().await {
+                    Ok((message, _info)) => match message.validate() {
+                        Ok(()) => {
+                            if tx.send(message).await.is_err() {
+                                break;
+                            }
+                        }
+                        Err(e) => {
+                            drops.record(name, &e.to_string());
+                        }
+                    },
+                    Err(e) => {
+                        drops.record(name, &format!("undecodable payload: {e:?}"));
+                    }
+                }
+            }
+        }));
+        Ok(rx)
+    }
+
+    /// Serves a service: validated requests arrive on the channel with a responder; invalid
+    /// ones get `invalid(reason)` as their response without reaching the node.
+    pub fn serve<S>(
+        &mut self,
+        service: Service<S>,
+        invalid: fn(&InvalidMessage) -> S::Response,
+    ) -> anyhow::Result<mpsc::Receiver<ServiceCall<S>>>
+    where
+        S: ServiceDefinition + 'static,
+        S::Request: Validate,
+    {
+        let server = self
+            .node
+            .create_server::<S::Request, S::Response>(
+                self.service_mapping,
+                &ros_name(service.name)?,
+                &ServiceTypeName::new(S::PACKAGE, S::NAME),
+                service_qos(),
+                service_qos(),
+            )
+            .with_context(|| format!("creating service {}", service.name))?;
+        let (tx, rx) = mpsc::channel(16);
+        let drops = self.drops.clone();
+        let name = service.name;
+        self.tasks.push(tokio::spawn(async move {
+            loop {
+                let (id, request) = match server.async_receive_request().await {
+                    Ok(r) => r,
+                    Err(e) => {
+                        drops.record(name, &format!("undecodable request: {e:?}"));
+                        continue;
+                    }
+                };
+                let response = match request.validate() {
+                    Err(e) => {
+                        drops.record(name, &e.to_string());
+                        invalid(&e)
+                    }
+                    Ok(()) => {
+                        let (responder, answer) = oneshot::channel();
+                        if tx.send(ServiceCall { request, responder }).await.is_err() {
+                            break;
+                        }
+                        match answer.await {
+                            Ok(response) => response,
+                            Err(_) => continue,
+                        }
+                    }
+                };
+                if let Err(e) = server.async_send_response(id, response).await {
+                    tracing::warn!(service = name, "could not send a response: {e:?}");
+                }
+            }
+        }));
+        Ok(rx)
+    }
+
+    /// A client for one of the suite's services.
+    pub fn client<S: ServiceDefinition>(
+        &mut self,
+        service: Service<S>,
+    ) -> anyhow::Result<ServiceClient<S>> {
+        let client = self
+            .node
+            .create_client::<S::Request, S::Response>(
+                self.service_mapping,
+                &ros_name(service.name)?,
+                &ServiceTypeName::new(S::PACKAGE, S::NAME),
+                service_qos(),
+                service_qos(),
+            )
+            .with_context(|| format!("creating a client for {}", service.name))?;
+        Ok(ServiceClient {
+            client: Arc::new(client),
+            name: service.name,
+        })
+    }
+
+    /// Waits until a server for `client` is matched, or `timeout` passes; true if matched.
+    pub async fn wait_for_service<S: ServiceDefinition>(
+        &self,
+        client: &ServiceClient<S>,
+        timeout: Duration,
+    ) -> bool {
+        tokio::time::timeout(timeout, client.client.wait_for_service(&self.node))
+            .await
+            .is_ok()
+    }
+
+    /// Resolves when SIGINT or SIGTERM arrives.
+    pub fn shutdown_signal(&self) -> impl std::future::Future<Output = ()> + Send + 'static {
+        let mut rx = self.shutdown.clone();
+        async move {
+            let _ = rx.wait_for(|stop| *stop).await;
+        }
+    }
+
+    /// Publishes a [`Heartbeat`] at 10 Hz for as long as the process lives.
+    fn start_heartbeat(&mut self) -> anyhow::Result<()> {
+        let outbox = self.publisher(HEARTBEAT)?;
+        let node_name = self.name.clone();
+        self.tasks.push(tokio::spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_millis(100));
+            let mut sequence = 0u64;
+            loop {
+                tick.tick().await;
+                outbox.send(Heartbeat {
+                    header: crate::header_now(),
+                    node_name: node_name.clone(),
+                    pid: std::process::id(),
+                    sequence,
+                });
+                sequence += 1;
+            }
+        }));
+        Ok(())
+    }
+
+    /// Leaves the graph cleanly so peers see the participant go at once. Drop the node's own
+    /// publishers, clients and receivers before calling this.
+    pub async fn stop(self) {
+        for task in &self.tasks {
+            task.abort();
+        }
+        for task in self.tasks {
+            let _ = task.await;
+        }
+        tracing::info!(node = %self.name, "node stopped");
+    }
+}
+
+fn spawn_signal_listener() -> anyhow::Result<watch::Receiver<bool>> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut interrupt = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
+    let mut terminate = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+    let (tx, rx) = watch::channel(false);
+    tokio::spawn(async move {
+        tokio::select! {
+            _ = interrupt.recv() => tracing::info!("SIGINT: shutting down"),
+            _ = terminate.recv() => tracing::info!("SIGTERM: shutting down"),
+        }
+        let _ = tx.send(true);
+    });
+    Ok(rx)
+}
+
+/// A typed publisher that logs (never panics on) failed writes.
+pub struct Outbox<M: Message> {
+    publisher: ros2_client::Publisher<M>,
+    topic: &'static str,
+}
+
+impl<M: Message + Serialize + std::fmt::Debug> Outbox<M> {
+    /// Publishes; a failure is logged with the topic and returned as false.
+    pub fn send(&self, message: M) -> bool {
+        match self.publisher.publish(message) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(topic = self.topic, "publish failed: {e:?}");
+                false
+            }
+        }
+    }
+
+    pub fn topic(&self) -> &'static str {
+        self.topic
+    }
+
+    /// Waits until a subscriber is matched (then a short settle, since the remote side may
+    /// match us a moment later), or `timeout` passes; true if matched.
+    pub async fn wait_for_subscribers(&self, shell: &NodeShell, timeout: Duration) -> bool {
+        let matched = tokio::time::timeout(timeout, self.publisher.wait_for_subscription(&shell.node))
+            .await
+            .is_ok();
+        if matched {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+        matched
+    }
+}
+
+use serde::Serialize;
+
+/// One validated service request and the way to answer it.
+pub struct ServiceCall<S: ServiceDefinition> {
+    pub request: S::Request,
+    responder: oneshot::Sender<S::Response>,
+}
+
+impl<S: ServiceDefinition> ServiceCall<S> {
+    pub fn respond(self, response: S::Response) {
+        // The caller may have gone; nothing to do then.
+        let _ = self.responder.send(response);
+    }
+}
+
+/// Why a service call gave no answer.
+#[derive(Debug, thiserror::Error)]
+pub enum CallError {
+    #[error("{service} did not answer within {timeout:?}")]
+    Timeout {
+        service: &'static str,
+        timeout: Duration,
+    },
+    #[error("{service}: {reason}")]
+    Failed {
+        service: &'static str,
+        reason: String,
+    },
+}
+
+/// A typed service client with a deadline on every call.
+pub struct ServiceClient<S: ServiceDefinition> {
+    client: Arc<ros2_client::Client<S::Request, S::Response>>,
+    name: &'static str,
+}
+
+impl<S: ServiceDefinition> Clone for ServiceClient<S> {
+    fn clone(&self) -> Self {
+        ServiceClient {
+            client: self.client.clone(),
+            name: self.name,
+        }
+    }
+}
+
+impl<S: ServiceDefinition> ServiceClient<S> {
+    pub async fn call(&self, request: S::Request, timeout: Duration) -> Result<S::Response, CallError> {
+        match tokio::time::timeout(timeout, self.client.async_call_service(request)).await {
+            Err(_) => Err(CallError::Timeout {
+                service: self.name,
+                timeout,
+            }),
+            Ok(Err(e)) => Err(CallError::Failed {
+                service: self.name,
+                reason: format!("{e:?}"),
+            }),
+            Ok(Ok(response)) => Ok(response),
+        }
+    }
+}
+
+/// Parameters of a node that has none of its own.
+#[derive(Debug, Clone, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoParameters {}
+

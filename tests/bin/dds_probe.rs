@@ -1,0 +1,141 @@
+//! A DDS peer for the cross-process tests. `responder` subscribes to the tablet answers and
+//! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable) and
+//! calls the service. Each prints one JSON line per event, so a test can check what crossed.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use node_shell::{NoParameters, NodeShell, ShellOptions, header_now};
+use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::topics::{PREDICT_USER, TABLET_ANSWER};
+use qt_therapy_msgs::{PredictUserRequest, PredictUserResponse, TabletAnswer, dds_type_name};
+use std::time::Duration;
+
+#[derive(Parser)]
+struct Cli {
+    #[command(subcommand)]
+    role: Role,
+    #[command(flatten)]
+    shell: ShellOptions,
+}
+
+#[derive(Subcommand)]
+enum Role {
+    /// Print every valid TabletAnswer and answer PredictUser until SIGINT/SIGTERM.
+    Responder,
+    /// Publish `count` answers plus bad ones, call PredictUser, then exit.
+    Caller {
+        #[arg(long, default_value_t = 5)]
+        count: u32,
+    },
+}
+
+fn emit(event: serde_json::Value) {
+    println!("{event}");
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let (mut shell, NoParameters {}) = NodeShell::start("dds_probe", &cli.shell)?;
+    match cli.role {
+        Role::Responder => responder(&mut shell).await?,
+        Role::Caller { count } => caller(&mut shell, count).await?,
+    }
+    shell.stop().await;
+    Ok(())
+}
+
+async fn responder(shell: &mut NodeShell) -> anyhow::Result<()> {
+    let mut answers = shell.subscribe(TABLET_ANSWER, 64)?;
+    let mut calls = shell.serve(PREDICT_USER, |e| PredictUserResponse {
+        ok: false,
+        error: e.to_string(),
+        ..Default::default()
+    })?;
+    emit(serde_json::json!({"event": "ready"}));
+    let stop = shell.shutdown_signal();
+    tokio::pin!(stop);
+    loop {
+        tokio::select! {
+            _ = &mut stop => break,
+            Some(a) = answers.recv() => emit(serde_json::json!({
+                "event": "answer", "sequence_id": a.sequence_id, "answer": a.answer,
+            })),
+            Some(call) = calls.recv() => {
+                let r = call.request.clone();
+                emit(serde_json::json!({"event": "request", "cluster": r.cluster, "level": r.level}));
+                // A deterministic function of the request, so the caller can check the reply
+                // came from this request.
+                let p = f64::from(r.level) / 4.0;
+                call.respond(PredictUserResponse {
+                    ok: true,
+                    error: String::new(),
+                    success_probability: p,
+                    success_std: 0.0,
+                    engagement: f64::from(r.outcome) * 0.5,
+                    engagement_std: f64::from(r.cluster),
+                });
+            }
+        }
+    }
+    let drops = shell.drops();
+    emit(serde_json::json!({"event": "stopped", "dropped_answers": drops.total(TABLET_ANSWER.name)}));
+    Ok(())
+}
+
+/// Same DDS type name as TabletAnswer, but only its header: a peer decoding it as a
+/// TabletAnswer runs out of bytes.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct TruncatedAnswer {
+    header: Header,
+}
+impl ros2_client::Message for TruncatedAnswer {}
+
+async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
+    let client = shell.client(PREDICT_USER)?;
+    if !shell.wait_for_service(&client, Duration::from_secs(20)).await {
+        anyhow::bail!("no PredictUser server appeared within 20 s");
+    }
+    let answers = shell.publisher(TABLET_ANSWER)?;
+    let qos = node_shell::qos_profile(TABLET_ANSWER.qos);
+    let node = shell.node_mut();
+    let topic = node
+        .create_topic(
+            &ros2_client::Name::new("/qt_therapy/tablet", "answer").map_err(|e| anyhow::anyhow!("{e:?}"))?,
+            dds_type_name::<TabletAnswer>(),
+            &qos,
+        )
+        .context("raw topic")?;
+    let truncated = node.create_publisher::<TruncatedAnswer>(&topic, None).context("raw publisher")?;
+    if !answers.wait_for_subscribers(shell, Duration::from_secs(20)).await {
+        anyhow::bail!("no TabletAnswer subscriber appeared within 20 s");
+    }
+
+    let valid = |i: u32| TabletAnswer {
+        header: header_now(),
+        session_id: "probe".into(),
+        sequence_id: i,
+        answer: vec!["happy".into(), "sad".into(), "angry".into()],
+        response_time: 1.5,
+    };
+    answers.send(valid(1));
+    // Out of range: an unknown emotion, then a NaN response time.
+    answers.send(TabletAnswer { answer: vec!["joyful".into()], ..valid(1000) });
+    answers.send(TabletAnswer { response_time: f32::NAN, ..valid(1001) });
+    // Undecodable as a TabletAnswer.
+    truncated.publish(TruncatedAnswer { header: header_now() }).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    for i in 2..=count {
+        answers.send(valid(i));
+    }
+    emit(serde_json::json!({"event": "published", "count": count}));
+
+    let good = client
+        .call(PredictUserRequest { cluster: 1, level: 3, feedback: 2, previous_score: -3, outcome: -1 }, Duration::from_secs(10))
+        .await?;
+    emit(serde_json::json!({"event": "response", "ok": good.ok, "p": good.success_probability, "e": good.engagement, "cluster": good.engagement_std}));
+    let bad = client
+        .call(PredictUserRequest { cluster: 0, level: 4, feedback: 0, previous_score: 0, outcome: 1 }, Duration::from_secs(10))
+        .await?;
+    emit(serde_json::json!({"event": "response", "ok": bad.ok, "error": bad.error}));
+    Ok(())
+}

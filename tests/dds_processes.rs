@@ -1,0 +1,71 @@
+//! Two separate processes talk over real DDS (RustDDS through the node shell) inside a private
+//! loopback network namespace: a topic carries messages one way, a service call goes and
+//! comes back, and malformed or out-of-range messages are dropped while the node keeps serving.
+
+use std::time::Duration;
+use suite_tests::{json_lines, run_in_loopback_netns, workspace_bin};
+
+#[test]
+fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
+    let probe = env!("CARGO_BIN_EXE_dds_probe");
+    let _ = workspace_bin; // the probe is this package's own binary
+    let dir = std::env::temp_dir().join(format!("dds_processes_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let d = dir.display();
+    let script = format!(
+        r#"
+        P={probe}; export ROS_LOCALHOST_ONLY=1
+        $P --params-file tests/params/dds_probe.yaml responder >{d}/responder.out 2>{d}/responder.err &
+        R=$!
+        $P --params-file tests/params/dds_probe.yaml caller --count 5 >{d}/caller.out 2>{d}/caller.err
+        C=$?
+        # Wait (at most 10 s) for the five valid answers to have been printed, then stop.
+        for i in $(seq 100); do [ "$(grep -c '"answer"' {d}/responder.out)" -ge 5 ] && break; sleep 0.1; done
+        kill -INT $R; wait $R; RC=$?
+        echo "{{\"event\":\"exit\",\"caller\":$C,\"responder\":$RC}}"
+        "#
+    );
+    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(90)) else {
+        return;
+    };
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap_or_default();
+    let (responder, caller, responder_err) = (read("responder.out"), read("caller.out"), read("responder.err"));
+    let context = format!(
+        "script stdout:\n{}\nresponder:\n{responder}\n{responder_err}\ncaller:\n{caller}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        read("caller.err")
+    );
+
+    let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
+    assert_eq!(exit.last().map(|e| (e["caller"].clone(), e["responder"].clone())), Some((0.into(), 0.into())), "{context}");
+
+    // The topic: exactly the five valid answers, in order.
+    let answers: Vec<u64> = json_lines(&responder)
+        .iter()
+        .filter(|e| e["event"] == "answer")
+        .filter_map(|e| e["sequence_id"].as_u64())
+        .collect();
+    assert_eq!(answers, vec![1, 2, 3, 4, 5], "{context}");
+
+    // The service: the valid request is answered from its own fields, the invalid one refused
+    // with the reason, without reaching the node's handler.
+    let responses: Vec<serde_json::Value> = json_lines(&caller).into_iter().filter(|e| e["event"] == "response").collect();
+    assert_eq!(responses.len(), 2, "{context}");
+    assert_eq!(responses[0]["ok"], true);
+    assert_eq!(responses[0]["p"], 0.75);
+    assert_eq!(responses[0]["e"], -0.5);
+    assert_eq!(responses[0]["cluster"], 1.0);
+    assert_eq!(responses[1]["ok"], false);
+    assert!(responses[1]["error"].as_str().unwrap_or("").contains("level = 4"), "{context}");
+    let requests = json_lines(&responder).iter().filter(|e| e["event"] == "request").count();
+    assert_eq!(requests, 1, "{context}");
+
+    // The bad answers were dropped and counted (two out of range, one undecodable), logged
+    // with the topic and reason, and the responder kept serving and exited cleanly.
+    let stopped = json_lines(&responder).into_iter().find(|e| e["event"] == "stopped");
+    assert_eq!(stopped.map(|e| e["dropped_answers"].clone()), Some(3.into()), "{context}");
+    assert!(responder_err.contains("/qt_therapy/tablet/answer"), "{context}");
+    assert!(responder_err.contains("joyful"), "{context}");
+    assert!(responder_err.contains("undecodable"), "{context}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
