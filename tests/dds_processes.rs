@@ -29,7 +29,11 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
         return;
     };
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap_or_default();
-    let (responder, caller, responder_err) = (read("responder.out"), read("caller.out"), read("responder.err"));
+    let (responder, caller, responder_err) = (
+        read("responder.out"),
+        read("caller.out"),
+        read("responder.err"),
+    );
     let context = format!(
         "script stdout:\n{}\nresponder:\n{responder}\n{responder_err}\ncaller:\n{caller}\n{}",
         String::from_utf8_lossy(&out.stdout),
@@ -37,7 +41,12 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
     );
 
     let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
-    assert_eq!(exit.last().map(|e| (e["caller"].clone(), e["responder"].clone())), Some((0.into(), 0.into())), "{context}");
+    assert_eq!(
+        exit.last()
+            .map(|e| (e["caller"].clone(), e["responder"].clone())),
+        Some((0.into(), 0.into())),
+        "{context}"
+    );
 
     // The topic: exactly the five valid answers, in order.
     let answers: Vec<u64> = json_lines(&responder)
@@ -49,22 +58,43 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
 
     // The service: the valid request is answered from its own fields, the invalid one refused
     // with the reason, without reaching the node's handler.
-    let responses: Vec<serde_json::Value> = json_lines(&caller).into_iter().filter(|e| e["event"] == "response").collect();
+    let responses: Vec<serde_json::Value> = json_lines(&caller)
+        .into_iter()
+        .filter(|e| e["event"] == "response")
+        .collect();
     assert_eq!(responses.len(), 2, "{context}");
     assert_eq!(responses[0]["ok"], true);
     assert_eq!(responses[0]["p"], 0.75);
     assert_eq!(responses[0]["e"], -0.5);
     assert_eq!(responses[0]["cluster"], 1.0);
     assert_eq!(responses[1]["ok"], false);
-    assert!(responses[1]["error"].as_str().unwrap_or("").contains("level = 4"), "{context}");
-    let requests = json_lines(&responder).iter().filter(|e| e["event"] == "request").count();
+    assert!(
+        responses[1]["error"]
+            .as_str()
+            .unwrap_or("")
+            .contains("level = 4"),
+        "{context}"
+    );
+    let requests = json_lines(&responder)
+        .iter()
+        .filter(|e| e["event"] == "request")
+        .count();
     assert_eq!(requests, 1, "{context}");
 
     // The bad answers were dropped and counted (two out of range, one undecodable), logged
     // with the topic and reason, and the responder kept serving and exited cleanly.
-    let stopped = json_lines(&responder).into_iter().find(|e| e["event"] == "stopped");
-    assert_eq!(stopped.map(|e| e["dropped_answers"].clone()), Some(3.into()), "{context}");
-    assert!(responder_err.contains("/qt_therapy/tablet/answer"), "{context}");
+    let stopped = json_lines(&responder)
+        .into_iter()
+        .find(|e| e["event"] == "stopped");
+    assert_eq!(
+        stopped.map(|e| e["dropped_answers"].clone()),
+        Some(3.into()),
+        "{context}"
+    );
+    assert!(
+        responder_err.contains("/qt_therapy/tablet/answer"),
+        "{context}"
+    );
     assert!(responder_err.contains("joyful"), "{context}");
     assert!(responder_err.contains("undecodable"), "{context}");
     let _ = std::fs::remove_dir_all(&dir);

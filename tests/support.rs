@@ -20,7 +20,11 @@ pub fn workspace_bin(name: &str) -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| workspace_root().join("target"));
-    let profile = if cfg!(debug_assertions) { "debug" } else { "release" };
+    let profile = if cfg!(debug_assertions) {
+        "debug"
+    } else {
+        "release"
+    };
     let path = target.join(profile).join(name);
     assert!(
         path.exists(),
@@ -47,7 +51,9 @@ pub fn can_make_network_namespace() -> bool {
 /// after `deadline`. Returns None (after saying why) where namespaces cannot be made.
 pub fn run_in_loopback_netns(script: &str, deadline: Duration) -> Option<Output> {
     if !can_make_network_namespace() {
-        eprintln!("skipping: this machine cannot create a network namespace (need root or user namespaces)");
+        eprintln!(
+            "skipping: this machine cannot create a network namespace (need root or user namespaces)"
+        );
         return None;
     }
     let netns = workspace_root().join("tests/loopback-netns");
@@ -56,7 +62,6 @@ pub fn run_in_loopback_netns(script: &str, deadline: Duration) -> Option<Output>
         .arg(format!("{}", deadline.as_secs().max(1)))
         .args(["bash", "-c", script])
         .current_dir(workspace_root())
-        .env("RUST_LOG", "info")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -74,7 +79,11 @@ pub fn run_in_loopback_netns(script: &str, deadline: Duration) -> Option<Output>
             Err(_) => break,
         }
     }
-    Some(child.wait_with_output().expect("collecting the namespace's output"))
+    Some(
+        child
+            .wait_with_output()
+            .expect("collecting the namespace's output"),
+    )
 }
 
 /// The JSON lines of `text` (others ignored).

@@ -36,7 +36,9 @@ pub struct Constant {
 }
 
 /// A Rust type that mirrors a `.msg` file (or one half of a `.srv` file).
-pub trait MessageDefinition: Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + Sync + 'static {
+pub trait MessageDefinition:
+    Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + Sync + 'static
+{
     const PACKAGE: &'static str;
     /// `Header`, `OpenFaceFeatures`, or `PredictUser_Request` for a service half.
     const NAME: &'static str;

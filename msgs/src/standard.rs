@@ -39,8 +39,8 @@ pub mod builtin_interfaces {
 }
 
 pub mod std_msgs {
-    use super::*;
     pub use super::builtin_interfaces::Time;
+    use super::*;
 
     ros_message! {
         /// Standard metadata for stamped data.

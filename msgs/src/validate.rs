@@ -28,12 +28,20 @@ fn fail<T>(message: &'static str, reason: impl Into<String>) -> Result<T, Invali
     })
 }
 
-fn check_id(message: &'static str, field: &str, id: &str, required: bool) -> Result<(), InvalidMessage> {
+fn check_id(
+    message: &'static str,
+    field: &str,
+    id: &str,
+    required: bool,
+) -> Result<(), InvalidMessage> {
     if required && id.is_empty() {
         return fail(message, format!("{field} is empty"));
     }
     if id.len() > MAX_ID_LEN || id.chars().any(char::is_control) {
-        return fail(message, format!("{field} is longer than {MAX_ID_LEN} bytes or has control characters"));
+        return fail(
+            message,
+            format!("{field} is longer than {MAX_ID_LEN} bytes or has control characters"),
+        );
     }
     Ok(())
 }
@@ -51,21 +59,40 @@ fn check_range<T: PartialOrd + std::fmt::Display + Copy>(
     Ok(())
 }
 
-fn check_unit(message: &'static str, field: &str, v: f32, low: f32, high: f32) -> Result<(), InvalidMessage> {
+fn check_unit(
+    message: &'static str,
+    field: &str,
+    v: f32,
+    low: f32,
+    high: f32,
+) -> Result<(), InvalidMessage> {
     if !v.is_finite() || v < low || v > high {
-        return fail(message, format!("{field} = {v} is not a number in [{low}, {high}]"));
+        return fail(
+            message,
+            format!("{field} = {v} is not a number in [{low}, {high}]"),
+        );
     }
     Ok(())
 }
 
-fn check_emotions(message: &'static str, field: &str, words: &[String]) -> Result<(), InvalidMessage> {
+fn check_emotions(
+    message: &'static str,
+    field: &str,
+    words: &[String],
+) -> Result<(), InvalidMessage> {
     if words.len() > 7 {
-        return fail(message, format!("{field} has {} emotions, at most 7 allowed", words.len()));
+        return fail(
+            message,
+            format!("{field} has {} emotions, at most 7 allowed", words.len()),
+        );
     }
     for (i, w) in words.iter().enumerate() {
         if w.parse::<Emotion>().is_err() {
             let shown: String = w.chars().take(20).collect();
-            return fail(message, format!("{field}[{i}] = {shown:?} is not happy, disgusted, sad or angry"));
+            return fail(
+                message,
+                format!("{field}[{i}] = {shown:?} is not happy, disgusted, sad or angry"),
+            );
         }
     }
     Ok(())
@@ -74,7 +101,12 @@ fn check_emotions(message: &'static str, field: &str, words: &[String]) -> Resul
 impl BehaviourState {
     /// The validated game state.
     pub fn to_state(&self) -> Result<State, InvalidMessage> {
-        State::new(self.level.into(), self.feedback.into(), self.previous_score.into()).or_else(|e| fail("BehaviourState", e.to_string()))
+        State::new(
+            self.level.into(),
+            self.feedback.into(),
+            self.previous_score.into(),
+        )
+        .or_else(|e| fail("BehaviourState", e.to_string()))
     }
 
     pub fn from_state(s: State) -> Self {
@@ -97,14 +129,29 @@ impl Validate for OpenFaceFeatures {
         const M: &str = "OpenFaceFeatures";
         check_id(M, "face_id", &self.face_id, false)?;
         if self.features.len() != usize::from(Self::FEATURE_COUNT) {
-            return fail(M, format!("has {} features, expected {}", self.features.len(), Self::FEATURE_COUNT));
+            return fail(
+                M,
+                format!(
+                    "has {} features, expected {}",
+                    self.features.len(),
+                    Self::FEATURE_COUNT
+                ),
+            );
         }
         if !self.confidence.is_finite() {
             return fail(M, "confidence is not a number");
         }
         if self.success {
             if let Some(i) = self.features.iter().position(|f| !f.is_finite()) {
-                return fail(M, format!("feature {} ({}) is {}", i, crate::OPENFACE_FEATURES[i], self.features[i]));
+                return fail(
+                    M,
+                    format!(
+                        "feature {} ({}) is {}",
+                        i,
+                        crate::OPENFACE_FEATURES[i],
+                        self.features[i]
+                    ),
+                );
             }
         }
         Ok(())
@@ -137,7 +184,13 @@ impl Validate for ExpectedEngagement {
 impl Validate for TherapistCommand {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "TherapistCommand";
-        check_range(M, "command", self.command, Self::START, Self::EMERGENCY_STOP)?;
+        check_range(
+            M,
+            "command",
+            self.command,
+            Self::START,
+            Self::EMERGENCY_STOP,
+        )?;
         check_id(M, "session_id", &self.session_id, true)?;
         check_id(M, "user_id", &self.user_id, self.command == Self::START)?;
         check_range(M, "user_model_cluster", self.user_model_cluster, -1, 63)?;
@@ -165,20 +218,33 @@ impl Validate for SequenceResult {
         check_id(M, "session_id", &self.session_id, true)?;
         check_id(M, "user_id", &self.user_id, false)?;
         check_range(M, "sequence_index", self.sequence_index, 1, 10)?;
-        self.state.validate().or_else(|e| fail(M, format!("state: {}", e.reason)))?;
+        self.state
+            .validate()
+            .or_else(|e| fail(M, format!("state: {}", e.reason)))?;
         check_range(M, "action", self.action, 0, 4)?;
         check_range(M, "level", self.level, 1, 3)?;
         check_range(M, "feedback", self.feedback, 0, 2)?;
         check_emotions(M, "sequence", &self.sequence)?;
         check_emotions(M, "answer", &self.answer)?;
         if self.sequence.len() != 2 * usize::from(self.level) + 1 {
-            return fail(M, format!("sequence has {} emotions for level {}", self.sequence.len(), self.level));
+            return fail(
+                M,
+                format!(
+                    "sequence has {} emotions for level {}",
+                    self.sequence.len(),
+                    self.level
+                ),
+            );
         }
         if self.outcome != 1 && self.outcome != -1 {
             return fail(M, format!("outcome = {} is not 1 or -1", self.outcome));
         }
         check_unit(M, "engagement", self.engagement, -1.0, 1.0)?;
-        if let Some(e) = self.engagement_per_second.iter().find(|e| !(e.is_finite() && (-1.0..=1.0).contains(*e))) {
+        if let Some(e) = self
+            .engagement_per_second
+            .iter()
+            .find(|e| !(e.is_finite() && (-1.0..=1.0).contains(*e)))
+        {
             return fail(M, format!("engagement_per_second holds {e}"));
         }
         check_unit(M, "response_time", self.response_time, 0.0, 3600.0)
@@ -209,7 +275,9 @@ impl Validate for TabletAnswer {
 impl Validate for Decision {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "Decision";
-        self.state.validate().or_else(|e| fail(M, format!("state: {}", e.reason)))?;
+        self.state
+            .validate()
+            .or_else(|e| fail(M, format!("state: {}", e.reason)))?;
         check_range(M, "step", self.step, 1, 10)?;
         check_range(M, "action", self.action, 0, 4)?;
         check_range(M, "level", self.level, 1, 3)?;
@@ -224,7 +292,10 @@ impl Validate for Decision {
 impl Validate for UserModelInfo {
     fn validate(&self) -> Result<(), InvalidMessage> {
         if self.clusters.len() != self.cluster_sizes.len() {
-            return fail("UserModelInfo", "clusters and cluster_sizes differ in length");
+            return fail(
+                "UserModelInfo",
+                "clusters and cluster_sizes differ in length",
+            );
         }
         Ok(())
     }
@@ -260,12 +331,21 @@ impl Validate for AssignClusterRequest {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "AssignCluster request";
         if self.user_vector.len() != 6 {
-            return fail(M, format!("user_vector has {} values, expected 6", self.user_vector.len()));
+            return fail(
+                M,
+                format!(
+                    "user_vector has {} values, expected 6",
+                    self.user_vector.len()
+                ),
+            );
         }
         for (i, v) in self.user_vector.iter().enumerate() {
             let (low, high) = if i % 2 == 0 { (0.0, 1.0) } else { (-1.0, 1.0) };
             if !v.is_finite() || *v < low || *v > high {
-                return fail(M, format!("user_vector[{i}] = {v} is outside [{low}, {high}]"));
+                return fail(
+                    M,
+                    format!("user_vector[{i}] = {v} is outside [{low}, {high}]"),
+                );
             }
         }
         Ok(())
@@ -279,9 +359,18 @@ impl Validate for DecideActionRequest {
         check_id(M, "user_id", &self.user_id, false)?;
         check_range(M, "user_model_cluster", self.user_model_cluster, -1, 63)?;
         check_range(M, "step", self.step, 1, 10)?;
-        let state = self.state.to_state().or_else(|e| fail(M, format!("state: {}", e.reason)))?;
+        let state = self
+            .state
+            .to_state()
+            .or_else(|e| fail(M, format!("state: {}", e.reason)))?;
         if (self.step == 1) != state.is_start() {
-            return fail(M, format!("step {} does not fit state {state}: only step 1 starts from (0, 0, 0)", self.step));
+            return fail(
+                M,
+                format!(
+                    "step {} does not fit state {state}: only step 1 starts from (0, 0, 0)",
+                    self.step
+                ),
+            );
         }
         Ok(())
     }
@@ -299,6 +388,10 @@ impl Validate for AssignClusterResponse {
 }
 impl Validate for DecideActionResponse {
     fn validate(&self) -> Result<(), InvalidMessage> {
-        if self.ok { self.decision.validate() } else { Ok(()) }
+        if self.ok {
+            self.decision.validate()
+        } else {
+            Ok(())
+        }
     }
 }

@@ -26,11 +26,19 @@ fn parse_definition(text: &str) -> Parsed {
         let (ty, rest) = line.split_once(char::is_whitespace).expect("type and name");
         let rest = rest.trim();
         if let Some((name, value)) = rest.split_once('=') {
-            parsed.constants.push((name.trim().to_string(), ty.to_string(), value.trim().to_string()));
+            parsed.constants.push((
+                name.trim().to_string(),
+                ty.to_string(),
+                value.trim().to_string(),
+            ));
         } else {
             let name = rest.split_whitespace().next().expect("field name");
             // Inside a package, `Type` means `this_package/Type`; `Header` is std_msgs/Header.
-            let ty = if ty == "Header" { "std_msgs/Header".to_string() } else { ty.to_string() };
+            let ty = if ty == "Header" {
+                "std_msgs/Header".to_string()
+            } else {
+                ty.to_string()
+            };
             parsed.fields.push((name.to_string(), ty));
         }
     }
@@ -43,7 +51,8 @@ fn qualify(ty: &str) -> String {
         None => (ty, ""),
     };
     const PRIMITIVES: [&str; 12] = [
-        "bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float32", "float64", "string",
+        "bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
+        "float32", "float64", "string",
     ];
     if base.contains('/') || PRIMITIVES.contains(&base) {
         ty.to_string()
@@ -54,8 +63,14 @@ fn qualify(ty: &str) -> String {
 
 fn rust_side(fields: Vec<Field>, constants: Vec<Constant>) -> Parsed {
     Parsed {
-        fields: fields.into_iter().map(|f| (f.name.to_string(), f.ros_type)).collect(),
-        constants: constants.into_iter().map(|c| (c.name.to_string(), c.ros_type, c.value)).collect(),
+        fields: fields
+            .into_iter()
+            .map(|f| (f.name.to_string(), f.ros_type))
+            .collect(),
+        constants: constants
+            .into_iter()
+            .map(|c| (c.name.to_string(), c.ros_type, c.value))
+            .collect(),
     }
 }
 
@@ -69,7 +84,13 @@ fn normalise(mut p: Parsed) -> Parsed {
 fn check<M: MessageDefinition>(text: &str) {
     let from_file = normalise(parse_definition(text));
     let from_rust = rust_side(M::fields(), M::constants());
-    assert_eq!(from_rust, from_file, "{}/{} differs from its interface file", M::PACKAGE, M::NAME);
+    assert_eq!(
+        from_rust,
+        from_file,
+        "{}/{} differs from its interface file",
+        M::PACKAGE,
+        M::NAME
+    );
 }
 
 fn package_dir() -> &'static Path {
@@ -77,7 +98,8 @@ fn package_dir() -> &'static Path {
 }
 
 fn read(rel: &str) -> String {
-    std::fs::read_to_string(package_dir().join(rel)).unwrap_or_else(|e| panic!("reading {rel}: {e}"))
+    std::fs::read_to_string(package_dir().join(rel))
+        .unwrap_or_else(|e| panic!("reading {rel}: {e}"))
 }
 
 #[test]
@@ -89,8 +111,20 @@ fn every_message_file_matches_its_rust_type() {
             checked.insert(format!("msg/{}.msg", <$t>::NAME));
         )*};
     }
-    msg!(BehaviourState, OpenFaceFeatures, EngagementEstimate, ExpectedEngagement, TherapistCommand, GameState,
-        SequenceResult, TabletTask, TabletAnswer, Decision, UserModelInfo, Heartbeat);
+    msg!(
+        BehaviourState,
+        OpenFaceFeatures,
+        EngagementEstimate,
+        ExpectedEngagement,
+        TherapistCommand,
+        GameState,
+        SequenceResult,
+        TabletTask,
+        TabletAnswer,
+        Decision,
+        UserModelInfo,
+        Heartbeat
+    );
     macro_rules! srv {
         ($($s:ty),*) => {$(
             let text = read(&format!("srv/{}.srv", <$s>::NAME));
@@ -107,16 +141,26 @@ fn every_message_file_matches_its_rust_type() {
     let mut on_disk = BTreeSet::new();
     for dir in ["msg", "srv"] {
         for entry in std::fs::read_dir(package_dir().join(dir)).expect("interface dir") {
-            let name = entry.expect("entry").file_name().to_string_lossy().to_string();
+            let name = entry
+                .expect("entry")
+                .file_name()
+                .to_string_lossy()
+                .to_string();
             on_disk.insert(format!("{dir}/{name}"));
         }
     }
-    assert_eq!(on_disk, checked, "interface files without a Rust mirror (or the reverse)");
+    assert_eq!(
+        on_disk, checked,
+        "interface files without a Rust mirror (or the reverse)"
+    );
 
     // And the CMakeLists lists every one of them for rosidl.
     let cmake = read("CMakeLists.txt");
     for file in &on_disk {
-        assert!(cmake.contains(&format!("\"{file}\"")), "CMakeLists.txt does not list {file}");
+        assert!(
+            cmake.contains(&format!("\"{file}\"")),
+            "CMakeLists.txt does not list {file}"
+        );
     }
 }
 
@@ -126,8 +170,14 @@ fn standard_types_match_ros2() {
     check::<Time>("int32 sec\nuint32 nanosec");
     check::<Header>("builtin_interfaces/Time stamp\nstring frame_id");
     check::<StringMsg>("string data");
-    assert_eq!(dds_type_name::<GameState>().dds_msg_type(), "qt_therapy_msgs::msg::dds_::GameState_");
-    assert_eq!(dds_type_name::<Header>().dds_msg_type(), "std_msgs::msg::dds_::Header_");
+    assert_eq!(
+        dds_type_name::<GameState>().dds_msg_type(),
+        "qt_therapy_msgs::msg::dds_::GameState_"
+    );
+    assert_eq!(
+        dds_type_name::<Header>().dds_msg_type(),
+        "std_msgs::msg::dds_::Header_"
+    );
 }
 
 #[test]
@@ -135,7 +185,11 @@ fn schema_text_appends_dependencies_once_in_rosbag2_form() {
     let schema = SequenceResult::schema_text();
     let separator = "=".repeat(80);
     assert!(schema.starts_with(SequenceResult::definition_text().trim_end()));
-    for dep in ["std_msgs/Header", "builtin_interfaces/Time", "qt_therapy_msgs/BehaviourState"] {
+    for dep in [
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "qt_therapy_msgs/BehaviourState",
+    ] {
         let marker = format!("{separator}\nMSG: {dep}\n");
         assert_eq!(schema.matches(&marker).count(), 1, "{dep} in\n{schema}");
     }
@@ -143,11 +197,21 @@ fn schema_text_appends_dependencies_once_in_rosbag2_form() {
 }
 
 fn stamp() -> Header {
-    Header { stamp: Time { sec: 1_648_134_409, nanosec: 123_456_789 }, frame_id: "camera_color_optical_frame".into() }
+    Header {
+        stamp: Time {
+            sec: 1_648_134_409,
+            nanosec: 123_456_789,
+        },
+        frame_id: "camera_color_optical_frame".into(),
+    }
 }
 
 fn state() -> BehaviourState {
-    BehaviourState { level: 2, feedback: 1, previous_score: -3 }
+    BehaviourState {
+        level: 2,
+        feedback: 1,
+        previous_score: -3,
+    }
 }
 
 fn round_trip<M: MessageDefinition + PartialEq + std::fmt::Debug>(value: M) {
@@ -156,7 +220,10 @@ fn round_trip<M: MessageDefinition + PartialEq + std::fmt::Debug>(value: M) {
     let (back, used) = from_bytes::<M, byteorder::LittleEndian>(&le).expect("deserialises");
     assert_eq!(back, value, "{} changed in a CDR round trip", M::NAME);
     assert_eq!(used, le.len(), "{} left bytes unread", M::NAME);
-    assert_eq!(to_vec::<M, byteorder::LittleEndian>(&back).expect("serialises"), le);
+    assert_eq!(
+        to_vec::<M, byteorder::LittleEndian>(&back).expect("serialises"),
+        le
+    );
     let be = to_vec::<M, byteorder::BigEndian>(&value).expect("serialises");
     let (back_be, _) = from_bytes::<M, byteorder::BigEndian>(&be).expect("deserialises");
     assert_eq!(back_be, value);
@@ -165,16 +232,38 @@ fn round_trip<M: MessageDefinition + PartialEq + std::fmt::Debug>(value: M) {
 #[test]
 fn every_type_round_trips_through_cdr_exactly() {
     let features: Vec<f32> = (0..32).map(|i| i as f32 * 0.37 - 5.0).collect();
-    round_trip(Time { sec: -3, nanosec: 999_999_999 });
+    round_trip(Time {
+        sec: -3,
+        nanosec: 999_999_999,
+    });
     round_trip(stamp());
-    round_trip(StringMsg { data: "Super gemacht! Ünïcode ✓".into() });
+    round_trip(StringMsg {
+        data: "Super gemacht! Ünïcode ✓".into(),
+    });
     round_trip(state());
-    round_trip(OpenFaceFeatures { header: stamp(), face_id: "0".into(), confidence: 0.98, success: true, features });
-    round_trip(EngagementEstimate { header: stamp(), face_id: "1".into(), label: -1, probability: 0.125 });
+    round_trip(OpenFaceFeatures {
+        header: stamp(),
+        face_id: "0".into(),
+        confidence: 0.98,
+        success: true,
+        features,
+    });
+    round_trip(EngagementEstimate {
+        header: stamp(),
+        face_id: "1".into(),
+        label: -1,
+        probability: 0.125,
+    });
     round_trip(ExpectedEngagement {
         header: stamp(),
-        window_start: Time { sec: 10, nanosec: 0 },
-        window_end: Time { sec: 11, nanosec: 0 },
+        window_start: Time {
+            sec: 10,
+            nanosec: 0,
+        },
+        window_end: Time {
+            sec: 11,
+            nanosec: 0,
+        },
         has_faces: true,
         mean: 0.5,
         smoothed: 0.25,
@@ -214,7 +303,9 @@ fn every_type_round_trips_through_cdr_exactly() {
         level: 2,
         feedback: 1,
         overridden: false,
-        sequence: ["happy", "sad", "angry", "disgusted", "happy"].map(String::from).to_vec(),
+        sequence: ["happy", "sad", "angry", "disgusted", "happy"]
+            .map(String::from)
+            .to_vec(),
         answer: ["happy", "sad", "angry"].map(String::from).to_vec(),
         outcome: -1,
         timed_out: false,
@@ -229,10 +320,18 @@ fn every_type_round_trips_through_cdr_exactly() {
         sequence_id: 7,
         sequence_index: 7,
         length: 7,
-        choices: ["happy", "disgusted", "sad", "angry"].map(String::from).to_vec(),
+        choices: ["happy", "disgusted", "sad", "angry"]
+            .map(String::from)
+            .to_vec(),
         timeout: 60.0,
     });
-    round_trip(TabletAnswer { header: stamp(), session_id: "s".into(), sequence_id: 7, answer: vec!["sad".into()], response_time: 3.5 });
+    round_trip(TabletAnswer {
+        header: stamp(),
+        session_id: "s".into(),
+        sequence_id: 7,
+        answer: vec!["sad".into()],
+        response_time: 3.5,
+    });
     let decision = Decision {
         header: stamp(),
         session_id: "s".into(),
@@ -257,8 +356,19 @@ fn every_type_round_trips_through_cdr_exactly() {
         cluster_sizes: vec![11, 9],
         kernel: "RationalQuadratic".into(),
     });
-    round_trip(Heartbeat { header: stamp(), node_name: "game_manager".into(), pid: 4242, sequence: 17 });
-    round_trip(PredictUserRequest { cluster: 1, level: 3, feedback: 2, previous_score: -3, outcome: -1 });
+    round_trip(Heartbeat {
+        header: stamp(),
+        node_name: "game_manager".into(),
+        pid: 4242,
+        sequence: 17,
+    });
+    round_trip(PredictUserRequest {
+        cluster: 1,
+        level: 3,
+        feedback: 2,
+        previous_score: -3,
+        outcome: -1,
+    });
     round_trip(PredictUserResponse {
         ok: true,
         error: String::new(),
@@ -267,8 +377,15 @@ fn every_type_round_trips_through_cdr_exactly() {
         engagement: -0.6,
         engagement_std: 0.2,
     });
-    round_trip(AssignClusterRequest { user_vector: vec![0.9, 0.5, 0.8, 0.6, 0.5, 0.5] });
-    round_trip(AssignClusterResponse { ok: false, error: "x".into(), cluster: -1, projection: vec![1.0, -2.0] });
+    round_trip(AssignClusterRequest {
+        user_vector: vec![0.9, 0.5, 0.8, 0.6, 0.5, 0.5],
+    });
+    round_trip(AssignClusterResponse {
+        ok: false,
+        error: "x".into(),
+        cluster: -1,
+        projection: vec![1.0, -2.0],
+    });
     round_trip(DecideActionRequest {
         session_id: "s".into(),
         user_id: "u".into(),
@@ -276,17 +393,31 @@ fn every_type_round_trips_through_cdr_exactly() {
         state: state(),
         step: 2,
     });
-    round_trip(DecideActionResponse { ok: true, error: String::new(), decision });
+    round_trip(DecideActionResponse {
+        ok: true,
+        error: String::new(),
+        decision,
+    });
 }
 
 #[test]
 fn cdr_layout_is_what_a_ros2_peer_writes() {
     // Hand-computed little-endian CDR: int32 sec, uint32 nanosec, then the string as a
     // uint32 length including the NUL, bytes, NUL.
-    let header = Header { stamp: Time { sec: 1, nanosec: 2 }, frame_id: "ab".into() };
+    let header = Header {
+        stamp: Time { sec: 1, nanosec: 2 },
+        frame_id: "ab".into(),
+    };
     let bytes = cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&header).expect("serialises");
     assert_eq!(bytes, [1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0, b'a', b'b', 0]);
     // int8 after uint8s needs no padding; a following uint32 aligns to 4.
-    let s = BehaviourState { level: 1, feedback: 2, previous_score: -3 };
-    assert_eq!(cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&s).expect("serialises"), [1, 2, 0xfd]);
+    let s = BehaviourState {
+        level: 1,
+        feedback: 2,
+        previous_score: -3,
+    };
+    assert_eq!(
+        cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&s).expect("serialises"),
+        [1, 2, 0xfd]
+    );
 }

@@ -79,7 +79,9 @@ async fn responder(shell: &mut NodeShell) -> anyhow::Result<()> {
         }
     }
     let drops = shell.drops();
-    emit(serde_json::json!({"event": "stopped", "dropped_answers": drops.total(TABLET_ANSWER.name)}));
+    emit(
+        serde_json::json!({"event": "stopped", "dropped_answers": drops.total(TABLET_ANSWER.name)}),
+    );
     Ok(())
 }
 
@@ -93,7 +95,10 @@ impl ros2_client::Message for TruncatedAnswer {}
 
 async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
     let client = shell.client(PREDICT_USER)?;
-    if !shell.wait_for_service(&client, Duration::from_secs(20)).await {
+    if !shell
+        .wait_for_service(&client, Duration::from_secs(20))
+        .await
+    {
         anyhow::bail!("no PredictUser server appeared within 20 s");
     }
     let answers = shell.publisher(TABLET_ANSWER)?;
@@ -101,13 +106,19 @@ async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
     let node = shell.node_mut();
     let topic = node
         .create_topic(
-            &ros2_client::Name::new("/qt_therapy/tablet", "answer").map_err(|e| anyhow::anyhow!("{e:?}"))?,
+            &ros2_client::Name::new("/qt_therapy/tablet", "answer")
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?,
             dds_type_name::<TabletAnswer>(),
             &qos,
         )
         .context("raw topic")?;
-    let truncated = node.create_publisher::<TruncatedAnswer>(&topic, None).context("raw publisher")?;
-    if !answers.wait_for_subscribers(shell, Duration::from_secs(20)).await {
+    let truncated = node
+        .create_publisher::<TruncatedAnswer>(&topic, None)
+        .context("raw publisher")?;
+    if !answers
+        .wait_for_subscribers(shell, Duration::from_secs(20))
+        .await
+    {
         anyhow::bail!("no TabletAnswer subscriber appeared within 20 s");
     }
 
@@ -120,21 +131,51 @@ async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
     };
     answers.send(valid(1));
     // Out of range: an unknown emotion, then a NaN response time.
-    answers.send(TabletAnswer { answer: vec!["joyful".into()], ..valid(1000) });
-    answers.send(TabletAnswer { response_time: f32::NAN, ..valid(1001) });
+    answers.send(TabletAnswer {
+        answer: vec!["joyful".into()],
+        ..valid(1000)
+    });
+    answers.send(TabletAnswer {
+        response_time: f32::NAN,
+        ..valid(1001)
+    });
     // Undecodable as a TabletAnswer.
-    truncated.publish(TruncatedAnswer { header: header_now() }).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    truncated
+        .publish(TruncatedAnswer {
+            header: header_now(),
+        })
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     for i in 2..=count {
         answers.send(valid(i));
     }
     emit(serde_json::json!({"event": "published", "count": count}));
 
     let good = client
-        .call(PredictUserRequest { cluster: 1, level: 3, feedback: 2, previous_score: -3, outcome: -1 }, Duration::from_secs(10))
+        .call(
+            PredictUserRequest {
+                cluster: 1,
+                level: 3,
+                feedback: 2,
+                previous_score: -3,
+                outcome: -1,
+            },
+            Duration::from_secs(10),
+        )
         .await?;
-    emit(serde_json::json!({"event": "response", "ok": good.ok, "p": good.success_probability, "e": good.engagement, "cluster": good.engagement_std}));
+    emit(
+        serde_json::json!({"event": "response", "ok": good.ok, "p": good.success_probability, "e": good.engagement, "cluster": good.engagement_std}),
+    );
     let bad = client
-        .call(PredictUserRequest { cluster: 0, level: 4, feedback: 0, previous_score: 0, outcome: 1 }, Duration::from_secs(10))
+        .call(
+            PredictUserRequest {
+                cluster: 0,
+                level: 4,
+                feedback: 0,
+                previous_score: 0,
+                outcome: 1,
+            },
+            Duration::from_secs(10),
+        )
         .await?;
     emit(serde_json::json!({"event": "response", "ok": bad.ok, "error": bad.error}));
     Ok(())

@@ -13,7 +13,11 @@ pub struct DropLog {
 /// Reasons carry values (e.g. "level = 4"); the key keeps only their first words so one kind of
 /// fault counts as one reason.
 fn reason_kind(reason: &str) -> String {
-    reason.split(['=', ':']).take(2).collect::<Vec<_>>().join(":")
+    reason
+        .split(['=', ':'])
+        .take(2)
+        .collect::<Vec<_>>()
+        .join(":")
 }
 
 impl DropLog {
@@ -32,7 +36,8 @@ impl DropLog {
         };
         if count == 1 {
             tracing::warn!(topic, reason, "dropped a message");
-        } else if count.is_power_of_two() && count >= 8 || [10, 100, 1000, 10_000].contains(&count) {
+        } else if count.is_power_of_two() && count >= 8 || [10, 100, 1000, 10_000].contains(&count)
+        {
             tracing::warn!(topic, reason, count, "dropped messages (same reason)");
         }
         count

@@ -62,7 +62,9 @@ impl<S: Subscriber> Layer<S> for RosoutLayer {
             Level::INFO => ros2_client::log::LogLevel::Info,
             _ => return,
         };
-        let Some(handle) = self.sink.0.get() else { return };
+        let Some(handle) = self.sink.0.get() else {
+            return;
+        };
         let mut text = MessageText::default();
         event.record(&mut text);
         let stamp = ros2_client::builtin_interfaces::Time::now();
@@ -92,7 +94,11 @@ pub fn init_logging(node_name: &str) -> RosoutSink {
                 .add_directive("ros2_client::rosout=off".parse().expect("static directive"))
                 .add_directive("ros2_client::node=off".parse().expect("static directive")),
         )
-        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_target(false))
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                .with_target(false),
+        )
         .with(RosoutLayer {
             sink: sink.clone(),
             node_name: node_name.to_string(),

@@ -70,7 +70,9 @@ pub fn parameter_map_from_str(
     let mut flat = Map::new();
     let mut found = false;
     for key in candidates.iter() {
-        let Some(section) = top.get(key) else { continue };
+        let Some(section) = top.get(key) else {
+            continue;
+        };
         let params = section
             .get("ros__parameters")
             .and_then(Value::as_object)
@@ -179,7 +181,10 @@ mod tests {
         let e = load("demo:\n  ros__parameters:\n    model_file: m\n    min_confidence: 1\n    min_confidnce: 2\n")
             .expect_err("unknown key");
         let msg = e.to_string();
-        assert!(msg.contains("params/demo.yaml") && msg.contains("min_confidnce"), "{msg}");
+        assert!(
+            msg.contains("params/demo.yaml") && msg.contains("min_confidnce"),
+            "{msg}"
+        );
     }
 
     #[test]
@@ -187,13 +192,19 @@ mod tests {
         let e = load("demo:\n  ros__parameters:\n    model_file: m\n    min_confidence: high\n")
             .expect_err("wrong type");
         let msg = e.to_string();
-        assert!(msg.contains("params/demo.yaml") && msg.contains("min_confidence"), "{msg}");
+        assert!(
+            msg.contains("params/demo.yaml") && msg.contains("min_confidence"),
+            "{msg}"
+        );
     }
 
     #[test]
     fn missing_section_and_bad_yaml_are_named() {
         let e = load("other:\n  ros__parameters:\n    x: 1\n").expect_err("no section");
-        assert!(e.to_string().contains("no section for node \"demo\""), "{e}");
+        assert!(
+            e.to_string().contains("no section for node \"demo\""),
+            "{e}"
+        );
         let e = load("demo: [unclosed\n").expect_err("bad yaml");
         assert!(e.to_string().contains("not valid YAML"), "{e}");
         let e = load("demo:\n  params: {}\n").expect_err("no ros__parameters");

@@ -8,7 +8,7 @@ use crate::logging::init_logging;
 use crate::params::{parameters_from_map, read_parameter_map};
 use anyhow::{Context as _, bail};
 use qt_therapy_msgs::services::ServiceDefinition;
-use qt_therapy_msgs::topics::{QosKind, Service, Topic, HEARTBEAT};
+use qt_therapy_msgs::topics::{HEARTBEAT, QosKind, Service, Topic};
 use qt_therapy_msgs::{Heartbeat, InvalidMessage, MessageDefinition, Validate, dds_type_name};
 use ros2_client::qos::{Durability, History, Reliability, WhenFull};
 use ros2_client::{
@@ -151,8 +151,12 @@ impl NodeShell {
             .with_context(|| format!("creating the DDS participant in domain {domain}"))?;
         let context = Context::from_domain_participant(participant)
             .context("creating the ros2-client context")?;
-        let node_name = NodeName::new(&options.namespace, &name)
-            .map_err(|e| anyhow::anyhow!("{name:?} in {:?} is not a node name: {e:?}", options.namespace))?;
+        let node_name = NodeName::new(&options.namespace, &name).map_err(|e| {
+            anyhow::anyhow!(
+                "{name:?} in {:?} is not a node name: {e:?}",
+                options.namespace
+            )
+        })?;
         let mut node = context
             .new_node(node_name, NodeOptions::new().enable_rosout(true))
             .with_context(|| format!("creating node {name}"))?;
@@ -221,7 +225,11 @@ impl NodeShell {
 
     /// A subscription whose decoded, validated messages arrive on the returned channel.
     /// Undecodable or invalid messages are logged once per topic and reason, and dropped.
-    pub fn subscribe<M>(&mut self, topic: Topic<M>, capacity: usize) -> anyhow::Result<mpsc::Receiver<M>>
+    pub fn subscribe<M>(
+        &mut self,
+        topic: Topic<M>,
+        capacity: usize,
+    ) -> anyhow::Result<mpsc::Receiver<M>>
     where
         M: MessageDefinition + Message + Validate,
     {
@@ -393,7 +401,8 @@ impl NodeShell {
 fn spawn_signal_listener() -> anyhow::Result<watch::Receiver<bool>> {
     use tokio::signal::unix::{SignalKind, signal};
     let mut interrupt = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
-    let mut terminate = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+    let mut terminate =
+        signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
     let (tx, rx) = watch::channel(false);
     tokio::spawn(async move {
         tokio::select! {
@@ -430,9 +439,10 @@ impl<M: Message + Serialize + std::fmt::Debug> Outbox<M> {
     /// Waits until a subscriber is matched (then a short settle, since the remote side may
     /// match us a moment later), or `timeout` passes; true if matched.
     pub async fn wait_for_subscribers(&self, shell: &NodeShell, timeout: Duration) -> bool {
-        let matched = tokio::time::timeout(timeout, self.publisher.wait_for_subscription(&shell.node))
-            .await
-            .is_ok();
+        let matched =
+            tokio::time::timeout(timeout, self.publisher.wait_for_subscription(&shell.node))
+                .await
+                .is_ok();
         if matched {
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
@@ -486,7 +496,11 @@ impl<S: ServiceDefinition> Clone for ServiceClient<S> {
 }
 
 impl<S: ServiceDefinition> ServiceClient<S> {
-    pub async fn call(&self, request: S::Request, timeout: Duration) -> Result<S::Response, CallError> {
+    pub async fn call(
+        &self,
+        request: S::Request,
+        timeout: Duration,
+    ) -> Result<S::Response, CallError> {
         match tokio::time::timeout(timeout, self.client.async_call_service(request)).await {
             Err(_) => Err(CallError::Timeout {
                 service: self.name,
@@ -505,4 +519,3 @@ impl<S: ServiceDefinition> ServiceClient<S> {
 #[derive(Debug, Clone, Default, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoParameters {}
-

@@ -1,0 +1,88 @@
+//! Out-of-range fields and unknown enum values are refused with a reason naming the field.
+
+use qt_therapy_msgs::*;
+
+fn reason<M: Validate>(m: &M) -> String {
+    m.validate().expect_err("must be refused").to_string()
+}
+
+#[test]
+fn features_must_be_32_finite_values() {
+    let mut f = OpenFaceFeatures {
+        success: true,
+        confidence: 0.9,
+        features: vec![0.0; 32],
+        ..Default::default()
+    };
+    assert!(f.validate().is_ok());
+    f.features.pop();
+    assert!(reason(&f).contains("has 31 features, expected 32"));
+    f.features = vec![0.0; 32];
+    f.features[5] = f32::NAN;
+    assert!(reason(&f).contains("pose_Rz"));
+    // A lost face may carry NaN: it is reported as missing, not refused.
+    f.success = false;
+    assert!(f.validate().is_ok());
+}
+
+#[test]
+fn levels_commands_and_states_are_range_checked() {
+    let s = GameState {
+        level: 4,
+        ..Default::default()
+    };
+    assert!(reason(&s).contains("level = 4"));
+    let c = TherapistCommand {
+        command: 9,
+        session_id: "s".into(),
+        ..Default::default()
+    };
+    assert!(reason(&c).contains("command = 9"));
+    let c = TherapistCommand {
+        command: TherapistCommand::OVERRIDE_LEVEL,
+        session_id: "s".into(),
+        level: 0,
+        ..Default::default()
+    };
+    assert!(reason(&c).contains("level = 0"));
+    let c = TherapistCommand {
+        command: TherapistCommand::START,
+        session_id: "s".into(),
+        ..Default::default()
+    };
+    assert!(reason(&c).contains("user_id is empty"));
+    let r = DecideActionRequest {
+        session_id: "s".into(),
+        state: BehaviourState {
+            level: 0,
+            feedback: 0,
+            previous_score: 0,
+        },
+        step: 2,
+        ..Default::default()
+    };
+    assert!(reason(&r).contains("only step 1 starts"));
+    let r = PredictUserRequest {
+        cluster: 0,
+        level: 1,
+        feedback: 3,
+        previous_score: 0,
+        outcome: 1,
+    };
+    assert!(reason(&r).contains("feedback = 3"));
+    let a = TabletAnswer {
+        session_id: "s".into(),
+        answer: vec!["HAPPY".into()],
+        ..Default::default()
+    };
+    assert!(reason(&a).contains("answer[0]"));
+    let a = TabletAnswer {
+        session_id: "s\u{7}".into(),
+        ..Default::default()
+    };
+    assert!(reason(&a).contains("control characters"));
+    let v = AssignClusterRequest {
+        user_vector: vec![0.5; 5],
+    };
+    assert!(reason(&v).contains("6"));
+}

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# The suite's test command (README): installs what a fresh machine lacks, builds every binary
+# (the cross-process tests start them), then runs every test. DDS tests put their processes in
+# a private loopback-only network namespace themselves (tests/loopback-netns).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_apt=()
+command -v ip >/dev/null || need_apt+=(iproute2)
+command -v unshare >/dev/null || need_apt+=(util-linux)
+[ -e /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need_apt+=(fonts-dejavu-core)
+command -v chromium >/dev/null || need_apt+=(chromium)
+command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "installing: ${need_apt[*]}"
+  if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
+  $SUDO apt-get update -qq && $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+
+cargo build --workspace --bins
+cargo test --workspace
+
+# Bags must be readable by the standard Python readers too.
+if [ -f tests/bags/check_bag.py ]; then
+  python3 -m pip install -q -r tests/bags/requirements.txt
+  python3 tests/bags/check_bag.py
+fi
