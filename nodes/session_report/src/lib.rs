@@ -1,0 +1,426 @@
+//! The session report: what happened in one session, for the therapist and the researcher.
+//! It takes the messages a session produced (from a bag or live), and writes one
+//! self-contained HTML page with plots: level and score per sequence, expected engagement over
+//! time with the answers and stage ends (the paper's Fig. 2), and every decision with its
+//! Q-values and whether the robot explored.
+
+use engagement_classifier::plot::{EngagementPlot, engagement_svg};
+use plotters::prelude::*;
+use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult};
+use std::fmt::Write as _;
+
+/// Why a report could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("the session has no sequence results: nothing to report")]
+    Empty,
+    #[error("drawing the {figure} figure: {reason}")]
+    Draw {
+        figure: &'static str,
+        reason: String,
+    },
+}
+
+/// The messages of one session, in the order they were logged.
+#[derive(Debug, Clone, Default)]
+pub struct SessionLog {
+    pub results: Vec<SequenceResult>,
+    pub engagement: Vec<ExpectedEngagement>,
+    pub decisions: Vec<Decision>,
+    pub states: Vec<GameState>,
+}
+
+/// Totals shown at the top of the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub session_id: String,
+    pub user_id: String,
+    pub cluster: i32,
+    pub sequences: usize,
+    pub correct: usize,
+    /// Sum of L * O: the paper's accumulated score.
+    pub score: i32,
+    /// Sum of L: the best score possible with these levels.
+    pub max_score: i32,
+    pub mean_engagement: Option<f64>,
+    pub timeouts: usize,
+    pub overrides: usize,
+    pub policy_fallbacks: usize,
+    pub explored: usize,
+}
+
+impl SessionLog {
+    pub fn summary(&self) -> Result<Summary, ReportError> {
+        let first = self.results.first().ok_or(ReportError::Empty)?;
+        let score = self
+            .results
+            .iter()
+            .map(|r| i32::from(r.level) * i32::from(r.outcome))
+            .sum();
+        let max_score = self.results.iter().map(|r| i32::from(r.level)).sum();
+        let with_engagement: Vec<f64> = self
+            .results
+            .iter()
+            .filter(|r| !r.engagement_per_second.is_empty())
+            .map(|r| f64::from(r.engagement))
+            .collect();
+        let mean_engagement = (!with_engagement.is_empty())
+            .then(|| with_engagement.iter().sum::<f64>() / with_engagement.len() as f64);
+        Ok(Summary {
+            session_id: first.session_id.clone(),
+            user_id: first.user_id.clone(),
+            cluster: first.user_model_cluster,
+            sequences: self.results.len(),
+            correct: self.results.iter().filter(|r| r.outcome == 1).count(),
+            score,
+            max_score,
+            mean_engagement,
+            timeouts: self.results.iter().filter(|r| r.timed_out).count(),
+            overrides: self.results.iter().filter(|r| r.overridden).count(),
+            policy_fallbacks: self
+                .states
+                .iter()
+                .filter(|s| s.policy_fallback && s.phase == GameState::DECIDING)
+                .map(|s| s.sequence_index)
+                .collect::<std::collections::BTreeSet<_>>()
+                .len(),
+            explored: self.decisions.iter().filter(|d| d.explored).count(),
+        })
+    }
+}
+
+fn draw_err(figure: &'static str) -> impl Fn(String) -> ReportError {
+    move |reason| ReportError::Draw { figure, reason }
+}
+
+/// Level (bars) and score L*O (markers) per sequence.
+pub fn levels_svg(log: &SessionLog) -> Result<String, ReportError> {
+    let err = draw_err("levels");
+    let n = log.results.len();
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1100, 320)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(format!("{e:?}")))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Level and score per sequence", ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.5..(n as f64 + 0.5), -3.5..3.5)
+            .map_err(|e| err(format!("{e:?}")))?;
+        chart
+            .configure_mesh()
+            .x_desc("sequence")
+            .y_desc("level / score")
+            .x_labels(n.max(1))
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .draw()
+            .map_err(|e| err(format!("{e:?}")))?;
+        let bars = log.results.iter().map(|r| {
+            let x = f64::from(r.sequence_index);
+            let colour = if r.feedback == 0 {
+                RGBColor(170, 190, 220)
+            } else {
+                RGBColor(250, 200, 120)
+            };
+            Rectangle::new(
+                [(x - 0.3, 0.0), (x + 0.3, f64::from(r.level))],
+                colour.filled(),
+            )
+        });
+        chart
+            .draw_series(bars)
+            .map_err(|e| err(format!("{e:?}")))?
+            .label("level (orange: after feedback)")
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 12, y + 5)],
+                    RGBColor(170, 190, 220).filled(),
+                )
+            });
+        let scores = log.results.iter().map(|r| {
+            let x = f64::from(r.sequence_index);
+            let s = f64::from(r.level) * f64::from(r.outcome);
+            let colour = if r.outcome == 1 {
+                RGBColor(30, 140, 60)
+            } else {
+                RGBColor(200, 40, 40)
+            };
+            Circle::new((x, s), 6, colour.filled())
+        });
+        chart
+            .draw_series(scores)
+            .map_err(|e| err(format!("{e:?}")))?
+            .label("score L·O (green right, red wrong)")
+            .legend(|(x, y)| Circle::new((x + 6, y), 5, RGBColor(30, 140, 60).filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(format!("{e:?}")))?;
+        root.present().map_err(|e| err(format!("{e:?}")))?;
+    }
+    Ok(svg)
+}
+
+/// Expected engagement over the session with answers and stage ends (paper's Fig. 2).
+pub fn engagement_over_time_svg(
+    log: &SessionLog,
+    title: &str,
+) -> Result<Option<String>, ReportError> {
+    let Some(first) = log.engagement.first() else {
+        return Ok(None);
+    };
+    let t0 = first.window_start.as_secs_f64();
+    let seconds: Vec<f64> = log
+        .engagement
+        .iter()
+        .map(|e| e.window_start.as_secs_f64() - t0)
+        .collect();
+    let value = |e: &ExpectedEngagement, v: f32| if e.has_faces { f64::from(v) } else { f64::NAN };
+    let engagement: Vec<f64> = log.engagement.iter().map(|e| value(e, e.mean)).collect();
+    let smoothed: Vec<f64> = log
+        .engagement
+        .iter()
+        .map(|e| value(e, e.smoothed))
+        .collect();
+    let answers: Vec<f64> = log
+        .results
+        .iter()
+        .map(|r| r.header.stamp.as_secs_f64() - t0)
+        .collect();
+    // A stage ends where the next sequence has another level.
+    let stage_ends: Vec<(f64, u8)> = log
+        .results
+        .windows(2)
+        .filter(|w| w[0].level != w[1].level)
+        .map(|w| (w[0].header.stamp.as_secs_f64() - t0, 2 * w[0].level + 1))
+        .chain(
+            log.results
+                .last()
+                .map(|r| (r.header.stamp.as_secs_f64() - t0, 2 * r.level + 1)),
+        )
+        .collect();
+    let plot = EngagementPlot {
+        title,
+        seconds: &seconds,
+        engagement: &engagement,
+        smoothed: &smoothed,
+        answers: &answers,
+        stage_ends: &stage_ends,
+    };
+    engagement_svg(&plot)
+        .map(Some)
+        .map_err(|e| ReportError::Draw {
+            figure: "engagement",
+            reason: e.to_string(),
+        })
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+const ACTIONS: [&str; 5] = ["L1", "L2", "L3", "encourage", "challenge"];
+
+/// The whole report as one HTML page (figures inline, no external resources).
+pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
+    let s = log.summary()?;
+    let mut html = String::new();
+    let title = format!(
+        "Session {} — user {}",
+        escape(&s.session_id),
+        escape(&s.user_id)
+    );
+    let _ = write!(
+        html,
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>{title}</title><style>\
+         body{{font-family:sans-serif;margin:24px;max-width:1150px}} table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #bbb;padding:3px 7px;text-align:right}} th{{background:#eef}}\
+         .ok{{color:#1a7f37}} .bad{{color:#c0392b}} .expl{{background:#fff3cd}}</style></head><body>\
+         <h1>{title}</h1>"
+    );
+    let engagement = s
+        .mean_engagement
+        .map(|e| format!("{e:+.2}"))
+        .unwrap_or_else(|| "no face seen".into());
+    let _ = write!(
+        html,
+        "<p>User-model cluster <b>{}</b>. {} sequences, {} right. Score <b>{}</b> of {} possible \
+         (ratio {:.2}). Mean expected engagement <b>{engagement}</b>. Timeouts {}, therapist \
+         overrides {}, policy fallbacks {}, exploratory decisions {}.</p>",
+        s.cluster,
+        s.sequences,
+        s.correct,
+        s.score,
+        s.max_score,
+        if s.max_score > 0 {
+            f64::from(s.score) / f64::from(s.max_score)
+        } else {
+            0.0
+        },
+        s.timeouts,
+        s.overrides,
+        s.policy_fallbacks,
+        s.explored
+    );
+    html.push_str(&levels_svg(log)?);
+    if let Some(svg) = engagement_over_time_svg(log, "Expected engagement over the session")? {
+        html.push_str(&svg);
+    } else {
+        html.push_str("<p>No expected-engagement messages were recorded.</p>");
+    }
+    html.push_str(
+        "<h2>Sequences and decisions</h2><table><tr><th>#</th><th>state (L,F,PS)</th><th>action</th>\
+         <th>how chosen</th><th>T</th><th>Q(L1)</th><th>Q(L2)</th><th>Q(L3)</th><th>Q(enc)</th>\
+         <th>Q(chal)</th><th>sequence</th><th>answer</th><th>result</th><th>time s</th><th>E</th></tr>",
+    );
+    for r in &log.results {
+        let d = log
+            .decisions
+            .iter()
+            .find(|d| d.session_id == r.session_id && d.step == r.sequence_index);
+        let action = ACTIONS.get(usize::from(r.action)).copied().unwrap_or("?");
+        let (how, t, qs, row_class) = match d {
+            _ if r.overridden => (
+                "therapist override".to_string(),
+                String::new(),
+                vec![String::new(); 5],
+                "",
+            ),
+            Some(d) => (
+                if d.explored {
+                    "explored".to_string()
+                } else {
+                    "greedy".to_string()
+                },
+                format!("{:.1}", d.temperature),
+                d.q_values.iter().map(|q| format!("{q:.2}")).collect(),
+                if d.explored { " class=\"expl\"" } else { "" },
+            ),
+            None => (
+                "fallback (no decision)".to_string(),
+                String::new(),
+                vec![String::new(); 5],
+                "",
+            ),
+        };
+        let result = if r.timed_out {
+            "<span class=\"bad\">timeout</span>".to_string()
+        } else if r.outcome == 1 {
+            format!("<span class=\"ok\">+{}</span>", r.level)
+        } else {
+            format!("<span class=\"bad\">-{}</span>", r.level)
+        };
+        let _ = write!(
+            html,
+            "<tr{row_class}><td>{}</td><td>({},{},{:+})</td><td>{action}</td><td>{how}</td><td>{t}</td>",
+            r.sequence_index, r.state.level, r.state.feedback, r.state.previous_score
+        );
+        for q in qs.iter().chain(std::iter::repeat(&String::new())).take(5) {
+            let _ = write!(html, "<td>{q}</td>");
+        }
+        let _ = write!(
+            html,
+            "<td>{}</td><td>{}</td><td>{result}</td><td>{:.1}</td><td>{:+.2}</td></tr>",
+            escape(&r.sequence.join(" ")),
+            escape(&r.answer.join(" ")),
+            r.response_time,
+            r.engagement
+        );
+    }
+    html.push_str("</table></body></html>\n");
+    Ok(html)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use qt_therapy_msgs::BehaviourState;
+    use qt_therapy_msgs::builtin_interfaces::Time;
+    use qt_therapy_msgs::std_msgs::Header;
+
+    fn result(i: u8, level: u8, outcome: i8, t: i32) -> SequenceResult {
+        SequenceResult {
+            header: Header::at(Time { sec: t, nanosec: 0 }),
+            session_id: "s1".into(),
+            user_id: "child-7".into(),
+            user_model_cluster: 1,
+            sequence_index: i,
+            state: BehaviourState {
+                level: if i == 1 { 0 } else { level },
+                feedback: 0,
+                previous_score: 0,
+            },
+            action: level - 1,
+            level,
+            feedback: 0,
+            sequence: vec!["happy".into(); usize::from(2 * level + 1)],
+            answer: vec!["happy".into(); usize::from(2 * level + 1)],
+            outcome,
+            activity_result: if outcome == 1 { f32::from(level) } else { -1.0 },
+            engagement: 0.5,
+            engagement_per_second: vec![0.5],
+            response_time: 5.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn summary_counts_score_as_the_paper_does() {
+        let log = SessionLog {
+            results: vec![
+                result(1, 1, 1, 10),
+                result(2, 3, -1, 40),
+                result(3, 2, 1, 70),
+            ],
+            ..Default::default()
+        };
+        let s = log.summary().expect("summary");
+        assert_eq!(
+            (s.score, s.max_score, s.correct, s.sequences),
+            (1 - 3 + 2, 6, 2, 3)
+        );
+        assert_eq!(s.mean_engagement, Some(0.5));
+        assert!(matches!(
+            SessionLog::default().summary(),
+            Err(ReportError::Empty)
+        ));
+    }
+
+    #[test]
+    fn report_has_figures_and_a_row_per_sequence() {
+        let engagement = (0..90)
+            .map(|k| ExpectedEngagement {
+                window_start: Time { sec: k, nanosec: 0 },
+                window_end: Time {
+                    sec: k + 1,
+                    nanosec: 0,
+                },
+                has_faces: k % 17 != 0,
+                mean: ((k as f32) / 10.0).sin(),
+                smoothed: ((k as f32) / 10.0).sin() * 0.8,
+                frame_count: 30,
+                ..Default::default()
+            })
+            .collect();
+        let log = SessionLog {
+            results: vec![
+                result(1, 1, 1, 10),
+                result(2, 3, -1, 40),
+                result(3, 2, 1, 70),
+            ],
+            engagement,
+            ..Default::default()
+        };
+        let html = report_html(&log).expect("report");
+        assert_eq!(html.matches("<svg").count(), 2);
+        assert_eq!(html.matches("<tr").count(), 4);
+        assert!(html.contains("Score <b>0</b> of 6"));
+        assert!(html.contains("child-7"));
+    }
+}
