@@ -128,7 +128,10 @@ mod tests {
         let idx = |n: &str| canonical_index(n).expect("known");
         assert!(nan_fill_uses_max(idx("gaze_angle_y")));
         assert!(nan_fill_uses_max(idx("pose_Tz")));
-        assert!(!nan_fill_uses_max(idx("pose_Rx")), "their list says of_pose_Rxv");
+        assert!(
+            !nan_fill_uses_max(idx("pose_Rx")),
+            "their list says of_pose_Rxv"
+        );
         assert!(!nan_fill_uses_max(idx("AU45_c")));
         assert!(is_continuous(idx("pose_Rx")) && !is_continuous(idx("AU01_c")));
     }

@@ -40,6 +40,8 @@ pub struct Preprocessing {
 /// Why a preprocessing block cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PreprocessingError {
+    #[error("not a preprocessing block: {0}")]
+    Parse(String),
     #[error("format is {0:?}, expected {PREPROCESSING_FORMAT:?}")]
     Format(String),
     #[error("field {field} has {got} values for {expected} features")]
@@ -55,7 +57,10 @@ pub enum PreprocessingError {
     #[error("feature {0:?} is missing")]
     MissingFeature(String),
     #[error("{field} of feature {feature:?} is not finite")]
-    NotFinite { field: &'static str, feature: String },
+    NotFinite {
+        field: &'static str,
+        feature: String,
+    },
 }
 
 impl Preprocessing {
@@ -116,7 +121,10 @@ impl Preprocessing {
     pub fn to_block(&self, model_features: &[usize]) -> PreprocessingBlock {
         PreprocessingBlock {
             format: PREPROCESSING_FORMAT.to_string(),
-            features: model_features.iter().map(|&c| model_feature_name(c)).collect(),
+            features: model_features
+                .iter()
+                .map(|&c| model_feature_name(c))
+                .collect(),
             mean: model_features.iter().map(|&c| self.mean[c]).collect(),
             std: model_features.iter().map(|&c| self.std[c]).collect(),
             nan_fill: model_features
@@ -224,13 +232,16 @@ mod tests {
     fn bad_blocks_name_the_problem() {
         let mut block = Preprocessing::fit(&rows()).to_block(&AUTHORS_FEATURE_ORDER);
         block.features[3] = "of_AU99_c".into();
-        let err = Preprocessing::from_block(&block).unwrap_err();
+        let err = Preprocessing::from_block(&block).expect_err("refused");
         assert!(err.to_string().contains("of_AU99_c"), "{err}");
         block.features[3] = block.features[4].clone();
-        let err = Preprocessing::from_block(&block).unwrap_err();
-        assert!(matches!(err, PreprocessingError::DuplicateFeature(_)), "{err}");
+        let err = Preprocessing::from_block(&block).expect_err("refused");
+        assert!(
+            matches!(err, PreprocessingError::DuplicateFeature(_)),
+            "{err}"
+        );
         block.features.pop();
-        let err = Preprocessing::from_block(&block).unwrap_err();
+        let err = Preprocessing::from_block(&block).expect_err("refused");
         assert!(err.to_string().contains("31 features"), "{err}");
     }
 }

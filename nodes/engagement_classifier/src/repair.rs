@@ -70,7 +70,10 @@ impl CleaningReport {
                 .iter()
                 .map(|(k, n)| format!("10^{k}: {n}"))
                 .collect();
-            s.push_str(&format!("\n  repaired by dividing by {}", powers.join(", ")));
+            s.push_str(&format!(
+                "\n  repaired by dividing by {}",
+                powers.join(", ")
+            ));
         }
         if self.set_missing > 0 {
             s.push_str(&format!("\n  set to missing: {}", self.set_missing));
@@ -89,7 +92,9 @@ pub(crate) fn repair_dotless(
     report.dotless_rows = dotless.iter().filter(|&&f| f != 0).count();
     for c in 0..FEATURE_COUNT {
         let bit = 1u32 << c;
-        let flagged: Vec<usize> = (0..table.len()).filter(|&i| dotless[i] & bit != 0).collect();
+        let flagged: Vec<usize> = (0..table.len())
+            .filter(|&i| dotless[i] & bit != 0)
+            .collect();
         report.dotless_values[c] = flagged.len();
         if flagged.is_empty() || policy == DecimalRepair::Keep {
             continue;
@@ -121,7 +126,7 @@ pub(crate) fn repair_dotless(
                 report.set_missing += 1;
                 continue;
             };
-            let (value, power) = closest_magnitude(table.rows[i][c], target);
+            let (value, power) = closest_magnitude(table.rows[i][c], target, physical_limit(c));
             table.rows[i][c] = value;
             *report.divided_by_power.entry(power).or_default() += 1;
         }
@@ -147,12 +152,30 @@ fn nearest_intact(
     out
 }
 
-/// `integer / 10^k` (k = 0..=digits) whose log10 magnitude is closest to `target`.
-fn closest_magnitude(integer: f64, target: f64) -> (f64, u32) {
+/// Largest |value| a feature can take: head rotations are angles in radians, gaze angles lie
+/// within a quarter turn; positions (mm) have no fixed bound.
+fn physical_limit(c: usize) -> f64 {
+    let name = crate::features::OPENFACE_FEATURES[c];
+    if name.starts_with("pose_R") {
+        std::f64::consts::PI
+    } else if name.starts_with("gaze_angle") {
+        std::f64::consts::FRAC_PI_2
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// `integer / 10^k` within `limit` whose log10 magnitude is closest to `target`. k runs past
+/// the number of digits because zeros after the lost point went with it
+/// (`0.018` -> `0018` -> `18`).
+fn closest_magnitude(integer: f64, target: f64, limit: f64) -> (f64, u32) {
     let digits = integer.abs().log10().floor().max(0.0) as u32 + 1;
     let mut best = (integer, 0u32, f64::INFINITY);
-    for k in 0..=digits {
+    for k in 0..=digits + 6 {
         let candidate = integer / 10f64.powi(k as i32);
+        if candidate.abs() > limit {
+            continue;
+        }
         let distance = (candidate.abs().log10() - target).abs();
         if distance < best.2 {
             best = (candidate, k, distance);
@@ -167,13 +190,26 @@ mod tests {
 
     #[test]
     fn closest_magnitude_puts_the_point_back() {
-        assert_eq!(closest_magnitude(-49981.0, 49.98f64.log10()), (-49.981, 3));
-        assert_eq!(closest_magnitude(18.0, 0.0175f64.log10()), (0.018, 3));
-        assert_eq!(closest_magnitude(1239304.0, 1239.14f64.log10()), (1239.304, 3));
+        let free = f64::INFINITY;
+        assert_eq!(
+            closest_magnitude(-49981.0, 49.98f64.log10(), free),
+            (-49.981, 3)
+        );
+        assert_eq!(closest_magnitude(18.0, 0.0175f64.log10(), free), (0.018, 3));
+        assert_eq!(
+            closest_magnitude(1239304.0, 1239.14f64.log10(), free),
+            (1239.304, 3)
+        );
         // an angle near -pi between neighbours near +pi and -pi keeps its magnitude
-        assert_eq!(closest_magnitude(-3065.0, 2.75f64.log10()), (-3.065, 3));
+        let pi = std::f64::consts::PI;
+        assert_eq!(closest_magnitude(-3065.0, 2.75f64.log10(), pi), (-3.065, 3));
+        // 4.4 is nearer 1.44 in magnitude, but no angle is 4.4 rad
+        assert_eq!(closest_magnitude(44.0, 1.44f64.log10(), pi), (0.44, 2));
         // a genuine integer stays as it is
-        assert_eq!(closest_magnitude(1240.0, 1239.0f64.log10()), (1240.0, 0));
+        assert_eq!(
+            closest_magnitude(1240.0, 1239.0f64.log10(), free),
+            (1240.0, 0)
+        );
     }
 
     fn table(values: &[(&str, f64)]) -> FeatureTable {
@@ -191,7 +227,13 @@ mod tests {
 
     #[test]
     fn repair_uses_the_same_participants_neighbours() {
-        let mut t = table(&[("a", 5.59), ("a", 5794.0), ("a", 5.78), ("b", 6003.0), ("b", 600.3)]);
+        let mut t = table(&[
+            ("a", 5.59),
+            ("a", 5794.0),
+            ("a", 5.78),
+            ("b", 6003.0),
+            ("b", 600.3),
+        ]);
         let dotless = [0, 1, 0, 1, 0];
         let mut report = CleaningReport::default();
         repair_dotless(&mut t, &dotless, DecimalRepair::Magnitude, &mut report);

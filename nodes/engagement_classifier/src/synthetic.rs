@@ -85,7 +85,10 @@ pub fn generate(spec: &SyntheticSpec) -> FeatureTable {
             let (pitch, yaw) = match (engaged, looks_down) {
                 (true, _) => (normal(&mut rng, 0.0, 0.08), normal(&mut rng, 0.0, 0.1)),
                 (false, true) => (normal(&mut rng, 0.45, 0.15), normal(&mut rng, 0.0, 0.15)),
-                (false, false) => (normal(&mut rng, 0.05, 0.1), turn_sign * normal(&mut rng, 0.65, 0.2)),
+                (false, false) => (
+                    normal(&mut rng, 0.05, 0.1),
+                    turn_sign * normal(&mut rng, 0.65, 0.2),
+                ),
             };
             row[rx] = pitch;
             row[ry] = yaw;
@@ -111,6 +114,10 @@ pub fn generate(spec: &SyntheticSpec) -> FeatureTable {
                     _ => 0.0,
                 };
                 row[c] = f64::from(u8::from(rng.random_bool((rate + shift).min(0.95))));
+            }
+            // OpenFace writes four decimals; so do we (it also gives the trees tied values).
+            for v in row.iter_mut() {
+                *v = (*v * 1e4).round() / 1e4;
             }
             let mut label: i8 = if engaged { 1 } else { -1 };
             if rng.random_bool(spec.label_noise) {
@@ -157,6 +164,6 @@ mod tests {
         assert!(mean_abs_yaw(1) < 0.2, "{}", mean_abs_yaw(1));
         assert!(mean_abs_yaw(-1) > 0.3, "{}", mean_abs_yaw(-1));
         assert!(t.rows.iter().flatten().all(|v| v.is_finite()));
-        assert!(t.labels.iter().any(|&l| l == 1) && t.labels.iter().any(|&l| l == -1));
+        assert!(t.labels.contains(&1) && t.labels.contains(&-1));
     }
 }

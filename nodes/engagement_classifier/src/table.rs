@@ -72,7 +72,10 @@ impl FeatureTable {
     /// The rows at `indices`, in that order.
     pub fn select(&self, indices: &[usize]) -> FeatureTable {
         FeatureTable {
-            participants: indices.iter().map(|&i| self.participants[i].clone()).collect(),
+            participants: indices
+                .iter()
+                .map(|&i| self.participants[i].clone())
+                .collect(),
             timestamps: indices.iter().map(|&i| self.timestamps[i]).collect(),
             labels: indices.iter().map(|&i| self.labels[i]).collect(),
             rows: indices.iter().map(|&i| self.rows[i]).collect(),
@@ -135,7 +138,9 @@ fn open(path: &Path) -> Result<csv::Reader<std::fs::File>, TableError> {
         path: path.to_path_buf(),
         source,
     })?;
-    Ok(csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(file))
+    Ok(csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(file))
 }
 
 /// Parses a feature cell: empty, `nan` or `NaN` are missing values.
@@ -186,9 +191,9 @@ pub fn load_labelled_csv(
         report.rows_read += 1;
         let field = |i: usize| record.get(i).unwrap_or("");
         let label = match field(label_at).parse::<f64>() {
-            Ok(v) if v == 1.0 => 1,
-            Ok(v) if v == -1.0 => -1,
-            Ok(v) if v == 0.0 => {
+            Ok(1.0) => 1,
+            Ok(-1.0) => -1,
+            Ok(0.0) => {
                 report.neutral_rows += 1;
                 match options.neutral_label {
                     NeutralLabel::Engaged => 1,

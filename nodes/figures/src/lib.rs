@@ -26,10 +26,28 @@ pub enum FigureError {
 
 /// Renders an SVG document to PNG bytes at `scale` (1.0 = the SVG's own size).
 pub fn svg_to_png(svg: &str, scale: f32, name_for_errors: &Path) -> Result<Vec<u8>, FigureError> {
+    render(svg, scale, name_for_errors)?
+        .encode_png()
+        .map_err(|e| FigureError::Png {
+            path: name_for_errors.to_path_buf(),
+            reason: e.to_string(),
+        })
+}
+
+fn render(
+    svg: &str,
+    scale: f32,
+    name_for_errors: &Path,
+) -> Result<resvg::tiny_skia::Pixmap, FigureError> {
     let mut options = resvg::usvg::Options::default();
     options.fontdb_mut().load_system_fonts();
-    // plotters names "sans-serif"; make sure it resolves to an installed face.
+    // plotters names the generic "sans-serif", which fontdb does not map to an installed face
+    // by itself: point the generic families at DejaVu (Debian's fonts-dejavu-core).
     options.font_family = "DejaVu Sans".to_string();
+    let fonts = options.fontdb_mut();
+    fonts.set_sans_serif_family("DejaVu Sans");
+    fonts.set_serif_family("DejaVu Serif");
+    fonts.set_monospace_family("DejaVu Sans Mono");
     let tree = resvg::usvg::Tree::from_str(svg, &options).map_err(|e| FigureError::BadSvg {
         path: name_for_errors.to_path_buf(),
         reason: e.to_string(),
@@ -55,10 +73,7 @@ pub fn svg_to_png(svg: &str, scale: f32, name_for_errors: &Path) -> Result<Vec<u
         resvg::tiny_skia::Transform::from_scale(scale, scale),
         &mut pixmap.as_mut(),
     );
-    pixmap.encode_png().map_err(|e| FigureError::Png {
-        path: name_for_errors.to_path_buf(),
-        reason: e.to_string(),
-    })
+    Ok(pixmap)
 }
 
 /// Writes `<stem>.svg` and `<stem>.png` and returns both paths. Each file is written to a
@@ -100,6 +115,19 @@ mod tests {
         let png = svg_to_png(svg, 1.0, Path::new("t.png")).expect("renders");
         assert_eq!(&png[1..4], b"PNG");
         assert!(png.len() > 100);
+    }
+
+    #[test]
+    fn generic_sans_serif_text_is_drawn() {
+        // plotters writes font-family="sans-serif": it must resolve to a real face.
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="200" height="40">
+            <text x="5" y="30" font-family="sans-serif" font-size="24">Engagement</text></svg>"#;
+        let pixmap = render(svg, 1.0, Path::new("t.png")).expect("renders");
+        let inked = pixmap.pixels().iter().filter(|p| p.red() < 128).count();
+        assert!(
+            inked > 100,
+            "only {inked} dark pixels: the text was not drawn"
+        );
     }
 
     #[test]

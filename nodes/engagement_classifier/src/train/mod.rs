@@ -7,7 +7,7 @@ mod export;
 mod tree;
 
 pub use export::to_model_file;
-pub use tree::{GradStats, TreeNode, TrainedTree};
+pub use tree::{GradStats, TrainedTree, TreeNode};
 
 use crate::features::{AUTHORS_FEATURE_ORDER, FEATURE_COUNT};
 use crate::model::{logit_like_xgboost, sigmoid_like_xgboost};

@@ -59,8 +59,6 @@ struct Split {
     feature: u32,
     value: f32,
     default_left: bool,
-    left: GradStats,
-    right: GradStats,
 }
 
 impl Split {
@@ -71,7 +69,9 @@ impl Split {
         } else if self.feature <= candidate.feature {
             candidate.loss_change > self.loss_change
         } else {
-            !(self.loss_change > candidate.loss_change)
+            // xgboost: `!(current > new)`, which a NaN also satisfies.
+            self.loss_change.partial_cmp(&candidate.loss_change)
+                != Some(std::cmp::Ordering::Greater)
         };
         if replace {
             *self = candidate;
@@ -153,18 +153,27 @@ impl Grower<'_> {
         }
     }
 
-    fn candidate(&self, nid: usize, feature: u32, value: f32, forward: bool, scanned: GradStats) -> Split {
+    fn candidate(
+        &self,
+        nid: usize,
+        feature: u32,
+        value: f32,
+        forward: bool,
+        scanned: GradStats,
+    ) -> Split {
         let rest = self.entries[nid].stats.minus(scanned);
         // Backward scans accumulate the right side; forward scans the left side.
-        let (left, right) = if forward { (scanned, rest) } else { (rest, scanned) };
+        let (left, right) = if forward {
+            (scanned, rest)
+        } else {
+            (rest, scanned)
+        };
         let gain = self.gain(left) + self.gain(right);
         Split {
             loss_change: gain - self.entries[nid].root_gain,
             feature,
             value,
             default_left: !forward,
-            left,
-            right,
         }
     }
 
@@ -185,7 +194,11 @@ impl Grower<'_> {
                 && g.entries[nid].stats.minus(e.stats).hess >= mcw
             {
                 let proposed = (value + e.last_value) * 0.5;
-                let split_at = if proposed == value { e.last_value } else { proposed };
+                let split_at = if proposed == value {
+                    e.last_value
+                } else {
+                    proposed
+                };
                 let c = g.candidate(nid, feature, split_at, forward, e.stats);
                 g.entries[nid].best.offer(c);
             }
@@ -252,7 +265,11 @@ impl Grower<'_> {
                 continue;
             }
             let v = data.rows[row][node.feature as usize];
-            let go_left = if v.is_nan() { node.default_left } else { v < node.value };
+            let go_left = if v.is_nan() {
+                node.default_left
+            } else {
+                v < node.value
+            };
             *pos = if go_left { node.left } else { node.right };
         }
     }
