@@ -48,6 +48,7 @@ ros_message! {
     /// Expected engagement over one second.
     pub struct ExpectedEngagement(PKG, "ExpectedEngagement", include_str!("../msg/ExpectedEngagement.msg")) {
         pub header: Header,
+        pub source: String,
         pub window_start: Time,
         pub window_end: Time,
         pub has_faces: bool,

@@ -172,6 +172,7 @@ impl Validate for EngagementEstimate {
 impl Validate for ExpectedEngagement {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "ExpectedEngagement";
+        check_id(M, "source", &self.source, false)?;
         check_unit(M, "mean", self.mean, -1.0, 1.0)?;
         check_unit(M, "smoothed", self.smoothed, -1.0, 1.0)?;
         if self.window_end.to_nanos() < self.window_start.to_nanos() {

@@ -256,6 +256,7 @@ fn every_type_round_trips_through_cdr_exactly() {
     });
     round_trip(ExpectedEngagement {
         header: stamp(),
+        source: "camera_color_optical_frame/0".into(),
         window_start: Time {
             sec: 10,
             nanosec: 0,

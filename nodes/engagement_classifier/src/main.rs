@@ -1,6 +1,6 @@
 //! `engagement_classifier`: the engagement node's offline tools, one module per subcommand
-//! under `cli/` (train, cross-validate, predict, synthesize, plot-study). The DDS node will
-//! be one more subcommand, `run`.
+//! under `cli/` (train, cross-validate, predict, synthesize, plot-study), and the DDS node,
+//! `run`.
 
 mod cli;
 
@@ -14,6 +14,11 @@ struct Cli {
 }
 
 fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    // The node sets up its own logging (stderr and /rosout) in the node shell.
+    if let cli::Command::Run(args) = cli.command {
+        return cli::run::run(args);
+    }
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
@@ -21,5 +26,5 @@ fn main() -> anyhow::Result<()> {
         )
         .with_writer(std::io::stderr)
         .init();
-    Cli::parse().command.run()
+    cli.command.run()
 }

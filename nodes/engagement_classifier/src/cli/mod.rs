@@ -4,6 +4,7 @@
 mod cross_validate;
 mod plot_study;
 mod predict;
+pub mod run;
 mod synthesize;
 mod train;
 
@@ -23,6 +24,8 @@ pub enum Command {
     Synthesize(synthesize::Args),
     /// Plot one study participant's expected engagement over the session (paper Fig. 2).
     PlotStudy(plot_study::Args),
+    /// Run the DDS node: OpenFace features in, engagement per frame and per second out.
+    Run(run::Args),
 }
 
 impl Command {
@@ -33,6 +36,7 @@ impl Command {
             Command::Predict(a) => predict::run(a),
             Command::Synthesize(a) => synthesize::run(a),
             Command::PlotStudy(a) => plot_study::run(a),
+            Command::Run(a) => run::run(a),
         }
     }
 }

@@ -1,0 +1,144 @@
+//! `engagement_classifier run`: the DDS node. OpenFace frames in; per frame an
+//! `EngagementEstimate`, per second of message time and source an `ExpectedEngagement` out.
+//! All logic is in `EngagementEstimator`; this only converts messages.
+
+use anyhow::Context;
+use engagement_classifier::{
+    EngagementClassifierParams, EngagementEstimator, EngagementSecond, FaceFrame, FrameOutcome,
+    SourceId,
+};
+use node_shell::{NodeShell, Outbox, ShellOptions};
+use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, OPENFACE_FEATURES};
+use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement, OpenFaceFeatures};
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    shell: ShellOptions,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?
+        .block_on(serve(args))
+}
+
+/// Maps "<camera>/<face>" to the estimator's numeric source ids and back.
+#[derive(Default)]
+struct Sources {
+    ids: HashMap<String, SourceId>,
+    names: Vec<String>,
+}
+
+impl Sources {
+    fn id(&mut self, frame: &OpenFaceFeatures) -> SourceId {
+        let name = format!("{}/{}", frame.header.frame_id, frame.face_id);
+        if let Some(id) = self.ids.get(&name) {
+            return *id;
+        }
+        let id = self.names.len() as SourceId;
+        self.names.push(name.clone());
+        self.ids.insert(name, id);
+        id
+    }
+
+    fn name(&self, id: SourceId) -> &str {
+        self.names.get(id as usize).map_or("?", String::as_str)
+    }
+}
+
+fn expected(second: &EngagementSecond, sources: &Sources) -> ExpectedEngagement {
+    ExpectedEngagement {
+        header: Header::at(Time::from_nanos(second.window_end_ns)),
+        source: sources.name(second.source).to_string(),
+        window_start: Time::from_nanos(second.window_start_ns),
+        window_end: Time::from_nanos(second.window_end_ns),
+        has_faces: second.engagement.is_some(),
+        mean: second.engagement.unwrap_or(0.0) as f32,
+        smoothed: second.smoothed_engagement.unwrap_or(0.0) as f32,
+        frame_count: second.frame_count(),
+        missing_count: second.missing_frames,
+    }
+}
+
+async fn serve(args: Args) -> anyhow::Result<()> {
+    let (mut shell, params): (NodeShell, EngagementClassifierParams) =
+        NodeShell::start("engagement_classifier", &args.shell)?;
+    let mut estimator =
+        EngagementEstimator::from_params(&params, Path::new(".")).with_context(|| {
+            format!(
+                "setting up from {}",
+                args.shell.params_path(shell.name()).display()
+            )
+        })?;
+    tracing::info!(model = %params.model_file, trees = estimator.model().tree_count(), "model loaded");
+    {
+        let mut frames = shell.subscribe(OPENFACE_FEATURES, 512)?;
+        let estimates = shell.publisher(ENGAGEMENT_ESTIMATE)?;
+        let seconds = shell.publisher(EXPECTED_ENGAGEMENT)?;
+        let drops = shell.drops();
+        let mut sources = Sources::default();
+        let mut closed: Vec<EngagementSecond> = Vec::with_capacity(16);
+        let publish_closed = |closed: &mut Vec<EngagementSecond>,
+                              sources: &Sources,
+                              out: &Outbox<ExpectedEngagement>| {
+            for s in closed.drain(..) {
+                out.send(expected(&s, sources));
+            }
+        };
+        // Message time runs on between frames at the wall clock's pace, so a camera that stops
+        // still gets its last seconds reported.
+        let mut last_stamp: Option<(i64, Instant)> = None;
+        let mut tick = tokio::time::interval(Duration::from_millis(250));
+        let stop = shell.shutdown_signal();
+        tokio::pin!(stop);
+        loop {
+            tokio::select! {
+                _ = &mut stop => break,
+                Some(frame) = frames.recv() => {
+                    let source = sources.id(&frame);
+                    let stamp_ns = frame.header.stamp.to_nanos();
+                    let face = FaceFrame {
+                        stamp_ns,
+                        source,
+                        detection_success: frame.success,
+                        confidence: frame.confidence,
+                        features: &frame.features,
+                    };
+                    match estimator.on_frame(&face, &mut |s| closed.push(*s)) {
+                        Ok(outcome) => {
+                            let (label, probability) = match outcome {
+                                FrameOutcome::Classified(p) => (p.label, p.probability),
+                                FrameOutcome::Missing(_) => (EngagementEstimate::MISSING, f32::NAN),
+                            };
+                            estimates.send(EngagementEstimate { header: frame.header.clone(), face_id: frame.face_id.clone(), label, probability });
+                        }
+                        Err(e) => {
+                            drops.record(OPENFACE_FEATURES.name, &e.to_string());
+                        }
+                    }
+                    last_stamp = Some((stamp_ns, Instant::now()));
+                    publish_closed(&mut closed, &sources, &seconds);
+                }
+                _ = tick.tick() => {
+                    if let Some((stamp, at)) = last_stamp {
+                        let now = stamp + at.elapsed().as_nanos() as i64;
+                        estimator.advance_to(now, &mut |s| closed.push(*s));
+                        publish_closed(&mut closed, &sources, &seconds);
+                    }
+                }
+            }
+        }
+        estimator.flush(&mut |s| closed.push(*s));
+        publish_closed(&mut closed, &sources, &seconds);
+    }
+    shell.stop().await;
+    Ok(())
+}
