@@ -1,0 +1,265 @@
+//! `therapist`: the therapist tablet's commands from a shell, and a live view of a session.
+//!   therapist start --user child-7 --cluster 0
+//!   therapist run-session --user sim-child --cluster 0   (start, follow to the end)
+//!   therapist override --session S --level 1 | pause | resume | stop | emergency-stop
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
+use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND};
+use qt_therapy_msgs::{Decision, GameState, TherapistCommand};
+use std::time::Duration;
+use therapist_console::sequence_line;
+
+#[derive(Parser)]
+#[command(about = "Send therapist commands to the game manager and follow a session")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    #[command(flatten)]
+    shell: ShellOptions,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Start a session for a user (pseudonymous id) with a user-model cluster (-1: policy default).
+    Start(StartArgs),
+    /// Start a session and print a line per sequence until it ends; exit 0 when it finished.
+    RunSession {
+        #[command(flatten)]
+        start: StartArgs,
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 1800)]
+        timeout: u64,
+    },
+    Pause(SessionArg),
+    Resume(SessionArg),
+    Stop(SessionArg),
+    EmergencyStop(SessionArg),
+    /// Override the level of the next sequence (1..3).
+    Override {
+        #[command(flatten)]
+        session: SessionArg,
+        #[arg(long)]
+        level: u8,
+    },
+}
+
+#[derive(clap::Args, Clone)]
+struct StartArgs {
+    #[arg(long)]
+    user: String,
+    #[arg(long, default_value_t = -1)]
+    cluster: i32,
+    /// Session id [default: session-<unix time>].
+    #[arg(long)]
+    session: Option<String>,
+    /// Seconds to wait for the game manager to appear.
+    #[arg(long, default_value_t = 60)]
+    wait: u64,
+}
+
+#[derive(clap::Args, Clone)]
+struct SessionArg {
+    #[arg(long)]
+    session: String,
+}
+
+/// Command ids only increase: milliseconds since the epoch.
+fn command(kind: u8, session: &str) -> TherapistCommand {
+    TherapistCommand {
+        header: header_now(),
+        command: kind,
+        session_id: session.to_string(),
+        command_id: (now_nanos() / 1_000_000).max(1) as u64,
+        ..Default::default()
+    }
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let (mut shell, NoParameters {}) = NodeShell::start("therapist_console", &cli.shell)?;
+    let code = {
+        let commands = shell.publisher(THERAPIST_COMMAND)?;
+        let mut states = shell.subscribe(GAME_STATE, 64)?;
+        let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
+        let mut decisions = shell.subscribe(DECISION, 64)?;
+        match cli.command {
+            Command::Start(a) => {
+                let c = start_command(&a, &mut states).await?;
+                send(&commands, &shell, c).await?;
+                0
+            }
+            Command::RunSession { start, timeout } => {
+                let c = start_command(&start, &mut states).await?;
+                let session = c.session_id.clone();
+                send(&commands, &shell, c).await?;
+                println!(
+                    "session {session} started for user {} (cluster {})",
+                    start.user, start.cluster
+                );
+                follow(
+                    &session,
+                    &mut states,
+                    &mut results,
+                    &mut decisions,
+                    Duration::from_secs(timeout),
+                    &shell,
+                )
+                .await?
+            }
+            Command::Pause(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    command(TherapistCommand::PAUSE, &s.session),
+                )
+                .await?
+            }
+            Command::Resume(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    command(TherapistCommand::RESUME, &s.session),
+                )
+                .await?
+            }
+            Command::Stop(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    command(TherapistCommand::STOP, &s.session),
+                )
+                .await?
+            }
+            Command::EmergencyStop(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    command(TherapistCommand::EMERGENCY_STOP, &s.session),
+                )
+                .await?
+            }
+            Command::Override { session, level } => {
+                let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &session.session);
+                c.level = level;
+                send(&commands, &shell, c).await?
+            }
+        }
+    };
+    shell.stop().await;
+    std::process::exit(code);
+}
+
+/// Sends one command once the game manager listens; returns the exit code.
+async fn send(
+    commands: &Outbox<TherapistCommand>,
+    shell: &NodeShell,
+    c: TherapistCommand,
+) -> anyhow::Result<i32> {
+    if !commands
+        .wait_for_subscribers(shell, Duration::from_secs(20))
+        .await
+    {
+        bail!("no game manager is listening on {}", THERAPIST_COMMAND.name);
+    }
+    commands.send(c);
+    Ok(0)
+}
+
+async fn start_command(
+    a: &StartArgs,
+    states: &mut tokio::sync::mpsc::Receiver<GameState>,
+) -> anyhow::Result<TherapistCommand> {
+    // The game state is transient-local: a running game manager's last state arrives at once.
+    let state = tokio::time::timeout(Duration::from_secs(a.wait), states.recv())
+        .await
+        .with_context(|| {
+            format!(
+                "no game manager published {} within {} s",
+                GAME_STATE.name, a.wait
+            )
+        })?
+        .context("game state channel closed")?;
+    if !matches!(
+        state.phase,
+        GameState::IDLE | GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
+    ) {
+        bail!(
+            "the game manager is busy with session {} (phase {}): stop it first",
+            state.session_id,
+            state.phase
+        );
+    }
+    let session = a
+        .session
+        .clone()
+        .unwrap_or_else(|| format!("session-{}", now_nanos() / 1_000_000_000));
+    let mut c = command(TherapistCommand::START, &session);
+    c.user_id = a.user.clone();
+    c.user_model_cluster = a.cluster;
+    Ok(c)
+}
+
+async fn follow(
+    session: &str,
+    states: &mut tokio::sync::mpsc::Receiver<GameState>,
+    results: &mut tokio::sync::mpsc::Receiver<qt_therapy_msgs::SequenceResult>,
+    decisions: &mut tokio::sync::mpsc::Receiver<Decision>,
+    timeout: Duration,
+    shell: &NodeShell,
+) -> anyhow::Result<i32> {
+    let deadline = tokio::time::sleep(timeout);
+    tokio::pin!(deadline);
+    let stop = shell.shutdown_signal();
+    tokio::pin!(stop);
+    let mut seen: Vec<Decision> = Vec::new();
+    let mut last_status = String::new();
+    let mut results_seen = 0;
+    loop {
+        tokio::select! {
+            _ = &mut deadline => { println!("session {session}: no end within {timeout:?}"); return Ok(2); }
+            _ = &mut stop => return Ok(130),
+            Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
+            Some(r) = results.recv() => if r.session_id == session {
+                let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
+                println!("{}", sequence_line(&r, d));
+                results_seen += 1;
+            },
+            Some(s) = states.recv() => {
+                if s.session_id != session { continue; }
+                if !s.status.is_empty() && s.status != last_status {
+                    println!("  [{}] {}", phase_name(s.phase), s.status);
+                    last_status = s.status.clone();
+                }
+                match s.phase {
+                    GameState::FINISHED => { println!("session {session} finished: {results_seen} sequences"); return Ok(0); }
+                    GameState::STOPPED | GameState::EMERGENCY_STOPPED => {
+                        println!("session {session} {}", phase_name(s.phase));
+                        return Ok(3);
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+}
+
+fn phase_name(phase: u8) -> &'static str {
+    const NAMES: [&str; 9] = [
+        "idle",
+        "deciding",
+        "giving feedback",
+        "saying sequence",
+        "waiting for answer",
+        "paused",
+        "finished",
+        "stopped",
+        "emergency stopped",
+    ];
+    NAMES
+        .get(usize::from(phase))
+        .copied()
+        .unwrap_or("unknown phase")
+}
