@@ -141,18 +141,18 @@ impl Validate for OpenFaceFeatures {
         if !self.confidence.is_finite() {
             return fail(M, "confidence is not a number");
         }
-        if self.success {
-            if let Some(i) = self.features.iter().position(|f| !f.is_finite()) {
-                return fail(
-                    M,
-                    format!(
-                        "feature {} ({}) is {}",
-                        i,
-                        crate::OPENFACE_FEATURES[i],
-                        self.features[i]
-                    ),
-                );
-            }
+        if self.success
+            && let Some(i) = self.features.iter().position(|f| !f.is_finite())
+        {
+            return fail(
+                M,
+                format!(
+                    "feature {} ({}) is {}",
+                    i,
+                    crate::OPENFACE_FEATURES[i],
+                    self.features[i]
+                ),
+            );
         }
         Ok(())
     }
