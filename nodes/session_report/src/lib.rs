@@ -50,6 +50,53 @@ pub struct Summary {
 }
 
 impl SessionLog {
+    /// The session's messages from a bag (topics missing from the bag are empty). With
+    /// `session` set, only that session; otherwise the last session in the bag.
+    pub fn from_bag(
+        reader: &bag::BagReader,
+        session: Option<&str>,
+    ) -> Result<SessionLog, bag::BagError> {
+        use qt_therapy_msgs::topics::{DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT};
+        fn read<M: qt_therapy_msgs::MessageDefinition>(
+            reader: &bag::BagReader,
+            topic: &str,
+        ) -> Result<Vec<M>, bag::BagError> {
+            match reader.messages::<M>(topic) {
+                Ok(v) => Ok(v.into_iter().map(|s| s.message).collect()),
+                Err(bag::BagError::NoSuchTopic { .. }) => Ok(Vec::new()),
+                Err(e) => Err(e),
+            }
+        }
+        let results: Vec<SequenceResult> = read(reader, SEQUENCE_RESULT.name)?;
+        let wanted = session
+            .map(str::to_string)
+            .or_else(|| results.last().map(|r| r.session_id.clone()))
+            .unwrap_or_default();
+        let mut log = SessionLog {
+            results: results
+                .into_iter()
+                .filter(|r| r.session_id == wanted)
+                .collect(),
+            decisions: read::<Decision>(reader, DECISION.name)?
+                .into_iter()
+                .filter(|d| d.session_id == wanted)
+                .collect(),
+            states: read::<GameState>(reader, GAME_STATE.name)?
+                .into_iter()
+                .filter(|s| s.session_id == wanted)
+                .collect(),
+            engagement: read(reader, EXPECTED_ENGAGEMENT.name)?,
+        };
+        // Engagement carries no session id: keep the seconds of this session's time span.
+        let start = log.states.first().map(|s| s.header.stamp.to_nanos());
+        let end = log.states.last().map(|s| s.header.stamp.to_nanos());
+        if let (Some(start), Some(end)) = (start, end) {
+            log.engagement
+                .retain(|e| e.window_end.to_nanos() >= start && e.window_start.to_nanos() <= end);
+        }
+        Ok(log)
+    }
+
     pub fn summary(&self) -> Result<Summary, ReportError> {
         let first = self.results.first().ok_or(ReportError::Empty)?;
         let score = self
