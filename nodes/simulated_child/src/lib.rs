@@ -18,6 +18,10 @@ use std::collections::BTreeSet;
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ChildParams {
+    /// The user-model file whose cluster drives the child.
+    pub user_model_file: String,
+    /// The cluster C_k the child behaves like.
+    pub cluster: i64,
     /// Seed of every draw (outcomes, delays, faces).
     pub seed: i64,
     /// Camera frames per second.
@@ -42,6 +46,8 @@ pub struct ChildParams {
 impl Default for ChildParams {
     fn default() -> Self {
         ChildParams {
+            user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
+            cluster: 0,
             seed: 7,
             fps: 30.0,
             answer_time_mean_s: vec![8.5, 13.3, 16.5],
