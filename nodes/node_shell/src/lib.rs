@@ -8,6 +8,7 @@ pub mod drops;
 pub mod logging;
 pub mod params;
 mod shell;
+pub mod tap;
 
 pub use shell::{
     CallError, NoParameters, NodeShell, Outbox, ServiceCall, ServiceClient, ShellOptions,

@@ -108,6 +108,32 @@ fn flatten(prefix: &str, map: &Map<String, Value>, out: &mut Map<String, Value>)
     }
 }
 
+/// Applies command-line overrides `key:=value` (ROS 2's `-p key:=value`); the value is read
+/// as YAML, so `0.2`, `true`, `[1, 2]` and `text` have their natural types.
+pub fn apply_overrides(
+    map: &mut Map<String, Value>,
+    overrides: &[String],
+    path: &Path,
+    node: &str,
+) -> Result<(), ParamsError> {
+    for o in overrides {
+        let (key, raw) = o.split_once(":=").ok_or_else(|| ParamsError::Key {
+            path: path.to_path_buf(),
+            node: node.to_string(),
+            key: o.clone(),
+            reason: "a parameter override must be KEY:=VALUE".into(),
+        })?;
+        let value: Value = serde_saphyr::from_str(raw).map_err(|e| ParamsError::Key {
+            path: path.to_path_buf(),
+            node: node.to_string(),
+            key: key.to_string(),
+            reason: format!("override value {raw:?} is not YAML: {e}"),
+        })?;
+        map.insert(key.trim().to_string(), value);
+    }
+    Ok(())
+}
+
 /// Deserialises a flat parameter map into `P` (which should use `deny_unknown_fields`).
 pub fn parameters_from_map<P: DeserializeOwned>(
     map: Map<String, Value>,
@@ -173,6 +199,35 @@ mod tests {
                 cameras: vec!["front".into(), "top".into()],
                 qos_depth: 5
             }
+        );
+    }
+
+    #[test]
+    fn overrides_replace_values_with_their_yaml_types() {
+        let path = Path::new("params/demo.yaml");
+        let mut map = parameter_map_from_str(
+            "demo:\n  ros__parameters:\n    model_file: m\n    min_confidence: 0.5\n",
+            path,
+            "demo",
+        )
+        .expect("map");
+        apply_overrides(
+            &mut map,
+            &["min_confidence:=0.9".into(), "cameras:=[a, b]".into()],
+            path,
+            "demo",
+        )
+        .expect("applies");
+        let d: Demo = parameters_from_map(map.clone(), path, "demo").expect("typed");
+        assert_eq!(
+            (d.min_confidence, d.cameras),
+            (0.9, vec!["a".to_string(), "b".to_string()])
+        );
+        assert!(apply_overrides(&mut map, &["nonsense".into()], path, "demo").is_err());
+        apply_overrides(&mut map, &["min_confidense:=1".into()], path, "demo").expect("applies");
+        assert!(
+            parameters_from_map::<Demo>(map, path, "demo").is_err(),
+            "unknown overridden key is refused"
         );
     }
 

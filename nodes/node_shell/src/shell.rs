@@ -5,7 +5,7 @@
 
 use crate::drops::DropLog;
 use crate::logging::init_logging;
-use crate::params::{parameters_from_map, read_parameter_map};
+use crate::params::{apply_overrides, parameters_from_map, read_parameter_map};
 use anyhow::{Context as _, bail};
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::{HEARTBEAT, QosKind, Service, Topic};
@@ -37,6 +37,9 @@ pub struct ShellOptions {
     /// Service mapping: `enhanced` talks to rmw_fastrtps peers, `cyclone` to rmw_cyclonedds.
     #[arg(long, env = "QT_SERVICE_MAPPING", default_value = "enhanced")]
     pub service_mapping: String,
+    /// Override one parameter of the file, as ROS 2's `-p`: `--param time_scale:=0.2`.
+    #[arg(long = "param", value_name = "KEY:=VALUE")]
+    pub param_overrides: Vec<String>,
 }
 
 impl ShellOptions {
@@ -132,7 +135,8 @@ impl NodeShell {
             .unwrap_or_else(|| default_name.to_string());
         let sink = init_logging(&name);
         let params_path = options.params_path(&name);
-        let map = read_parameter_map(&params_path, &name)?;
+        let mut map = read_parameter_map(&params_path, &name)?;
+        apply_overrides(&mut map, &options.param_overrides, &params_path, &name)?;
         let params: P = parameters_from_map(map, &params_path, &name)?;
         let service_mapping = match options.service_mapping.to_ascii_lowercase().as_str() {
             "enhanced" => ServiceMapping::Enhanced,
