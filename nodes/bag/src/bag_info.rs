@@ -1,0 +1,203 @@
+//! What `bag info` reports about a bag (topics, types, counts, duration, compression, damage),
+//! as a value and as text laid out like `ros2 bag info`.
+
+use crate::reader::BagReader;
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// One topic's line of `bag info`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TopicSummary {
+    pub topic: String,
+    pub type_name: String,
+    pub count: u64,
+    pub serialization_format: String,
+    /// The offered QoS class (`reliable`, `state`, `features`) when the metadata names one.
+    pub qos: Option<String>,
+}
+
+/// A bag's summary.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BagInfo {
+    pub file: String,
+    pub size_bytes: u64,
+    pub profile: String,
+    pub library: String,
+    pub messages: u64,
+    pub start_ns: Option<u64>,
+    pub end_ns: Option<u64>,
+    pub duration_ns: u64,
+    pub chunks: u64,
+    /// Compression name ("none" for uncompressed chunks) and chunk count.
+    pub compression: Vec<(String, u64)>,
+    pub ros_distro: Option<String>,
+    /// Footer and closing magic present.
+    pub complete: bool,
+    /// The first bad record, if any.
+    pub damage: Option<String>,
+    pub topics: Vec<TopicSummary>,
+}
+
+impl BagInfo {
+    pub fn of(reader: &BagReader) -> BagInfo {
+        let counts = reader.counts();
+        let topics = reader
+            .channels()
+            .map(|c| TopicSummary {
+                topic: c.topic.clone(),
+                type_name: c.type_name().to_string(),
+                count: counts.get(&c.id).copied().unwrap_or(0),
+                serialization_format: c.message_encoding.clone(),
+                qos: c
+                    .offered_qos()
+                    .map(|k| format!("{k:?}").to_ascii_lowercase()),
+            })
+            .collect();
+        let (chunks, compression) = reader.chunks();
+        let range = reader.time_range();
+        let ros_distro = reader
+            .metadata()
+            .iter()
+            .filter(|(name, _)| name == "rosbag2")
+            .filter_map(|(_, m)| m.get("serialized_metadata"))
+            .flat_map(|text| text.lines())
+            .find_map(|l| l.strip_prefix("ros_distro:"))
+            .map(|d| d.trim().to_string());
+        BagInfo {
+            file: reader.name().to_string(),
+            size_bytes: reader.size_bytes(),
+            profile: reader.profile().unwrap_or("").to_string(),
+            library: reader.library().unwrap_or("").to_string(),
+            messages: reader.raw_messages().len() as u64,
+            start_ns: range.map(|r| r.0),
+            end_ns: range.map(|r| r.1),
+            duration_ns: range.map_or(0, |(a, b)| b.saturating_sub(a)),
+            chunks,
+            compression: compression
+                .iter()
+                .map(|(c, n)| (if c.is_empty() { "none" } else { c }.to_string(), *n))
+                .collect(),
+            ros_distro,
+            complete: reader.is_complete(),
+            damage: reader.damage().map(|e| e.to_string()),
+            topics,
+        }
+    }
+
+    /// The report, laid out like `ros2 bag info`.
+    pub fn to_text(&self) -> String {
+        let mut t = String::new();
+        let mut line = |k: &str, v: String| {
+            let key = if k.is_empty() {
+                String::new()
+            } else {
+                format!("{k}:")
+            };
+            let _ = writeln!(t, "{key:<19}{v}");
+        };
+        line("Files", self.file.clone());
+        line("Bag size", human_size(self.size_bytes));
+        line("Storage id", format!("mcap (profile {:?})", self.profile));
+        line(
+            "ROS Distro",
+            self.ros_distro.clone().unwrap_or_else(|| "unknown".into()),
+        );
+        line(
+            "Duration",
+            format!("{:.9}s", self.duration_ns as f64 * 1e-9),
+        );
+        if let (Some(s), Some(e)) = (self.start_ns, self.end_ns) {
+            line("Start", format!("{} ({})", utc(s), secs(s)));
+            line("End", format!("{} ({})", utc(e), secs(e)));
+        }
+        line("Messages", self.messages.to_string());
+        let compression: Vec<String> = self
+            .compression
+            .iter()
+            .map(|(c, n)| format!("{c} x{n}"))
+            .collect();
+        line(
+            "Chunks",
+            format!("{} [{}]", self.chunks, compression.join(", ")),
+        );
+        line(
+            "Closed cleanly",
+            if self.complete {
+                "yes"
+            } else {
+                "no (no footer: recovered up to the last complete record)"
+            }
+            .into(),
+        );
+        if let Some(d) = &self.damage {
+            line("Damage", d.clone());
+        }
+        let width = self.topics.iter().map(|x| x.topic.len()).max().unwrap_or(0);
+        for (i, x) in self.topics.iter().enumerate() {
+            let qos = x
+                .qos
+                .as_deref()
+                .map_or(String::new(), |q| format!(" | QoS: {q}"));
+            let text = format!(
+                "Topic: {:<width$} | Type: {} | Count: {} | Serialization Format: {}{qos}",
+                x.topic, x.type_name, x.count, x.serialization_format
+            );
+            line(if i == 0 { "Topic information" } else { "" }, text);
+        }
+        t
+    }
+}
+
+fn human_size(bytes: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB"];
+    let mut v = bytes as f64;
+    let mut unit = 0;
+    while v >= 1024.0 && unit + 1 < units.len() {
+        v /= 1024.0;
+        unit += 1;
+    }
+    format!("{v:.1} {}", units[unit])
+}
+
+fn secs(ns: u64) -> String {
+    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+/// `YYYY-MM-DD HH:MM:SS.nnnnnnnnn UTC` (days-to-civil after Howard Hinnant's algorithm).
+fn utc(ns: u64) -> String {
+    let total = ns / 1_000_000_000;
+    let (days, rem) = ((total / 86_400) as i64, total % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02} {:02}:{:02}:{:02}.{:09} UTC",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60,
+        ns % 1_000_000_000
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates_and_sizes() {
+        assert_eq!(utc(0), "1970-01-01 00:00:00.000000000 UTC");
+        // 2024-02-29 12:34:56.5 UTC = 1709210096.5 s
+        assert_eq!(
+            utc(1_709_210_096_500_000_000),
+            "2024-02-29 12:34:56.500000000 UTC"
+        );
+        assert_eq!(human_size(1536), "1.5 KiB");
+        assert_eq!(secs(1_500_000_001), "1.500000001");
+    }
+}

@@ -1,0 +1,300 @@
+//! The therapist's commands. Each names its session and carries an id that must increase
+//! within the session: stale, duplicated and wrong-session commands are rejected with a
+//! reason (log and GameState.status) and the session goes on. An emergency stop for the
+//! running session is honoured even with an out-of-order id: silencing the robot is never
+//! the unsafe choice.
+
+use super::{Current, GameManager, Phase, Session, Timer};
+use crate::protocol::LogLevel;
+use crate::sequence::SessionRng;
+use crate::session_file::SessionEnd;
+use qt_therapy_msgs::TherapistCommand;
+use sequence_game::{Level, State};
+
+fn command_name(code: u8) -> &'static str {
+    match code {
+        TherapistCommand::START => "start",
+        TherapistCommand::PAUSE => "pause",
+        TherapistCommand::RESUME => "resume",
+        TherapistCommand::STOP => "stop",
+        TherapistCommand::OVERRIDE_LEVEL => "override level",
+        TherapistCommand::EMERGENCY_STOP => "emergency stop",
+        _ => "unknown",
+    }
+}
+
+impl GameManager {
+    pub(super) fn on_command(&mut self, c: TherapistCommand, now: i64) {
+        let what = format!(
+            "command {} ({}) for session {:?}",
+            c.command_id,
+            command_name(c.command),
+            c.session_id
+        );
+        if let Err(reason) = self.check_command(&c) {
+            if let Some(s) = self.session.as_mut() {
+                s.rejected_commands += 1;
+            }
+            self.reject(format!("{what}: {reason}"), now);
+            return;
+        }
+        if c.command == TherapistCommand::START {
+            self.start_session(&c, now);
+            return;
+        }
+        // Only an emergency stop gets here with an id that is not new.
+        let out_of_order = self.session.as_mut().and_then(|s| {
+            let last = s.last_command_id;
+            s.last_command_id = last.max(c.command_id);
+            (c.command_id <= last).then_some(last)
+        });
+        if c.command == TherapistCommand::EMERGENCY_STOP {
+            // Silence first; explain afterwards.
+            self.end_session(
+                SessionEnd::EmergencyStopped,
+                "emergency stop by the therapist",
+                now,
+            );
+            if let Some(last) = out_of_order {
+                self.log(
+                    LogLevel::Warn,
+                    format!("{what}: out-of-order id (last {last}) honoured for an emergency stop"),
+                );
+            }
+            return;
+        }
+        self.log(LogLevel::Info, format!("accepted {what}"));
+        match c.command {
+            TherapistCommand::PAUSE => self.pause(c.command_id, now),
+            TherapistCommand::RESUME => self.resume(now),
+            TherapistCommand::STOP => {
+                self.end_session(SessionEnd::Stopped, "stopped by the therapist", now)
+            }
+            _ => self.override_level(c.level, now),
+        }
+    }
+
+    /// Why a command cannot be carried out now, if it cannot.
+    fn check_command(&self, c: &TherapistCommand) -> Result<(), String> {
+        if c.command > TherapistCommand::EMERGENCY_STOP {
+            return Err(format!("unknown command code {}", c.command));
+        }
+        if c.session_id.is_empty() {
+            return Err("session_id is empty".into());
+        }
+        let running = self.session_running();
+        let session = self.session.as_ref();
+        if c.command == TherapistCommand::START {
+            if running && let Some(s) = session {
+                if s.id == c.session_id {
+                    check_order(s, c)?;
+                    return Err("this session is already running".into());
+                }
+                return Err(format!("busy with session {:?}: stop it first", s.id));
+            }
+            if self.used_sessions.contains(&c.session_id) {
+                return Err("this session id was already used; start a new session id".into());
+            }
+            if c.user_id.is_empty() {
+                return Err("user_id is empty".into());
+            }
+            if !(-1..=63).contains(&c.user_model_cluster) {
+                return Err(format!(
+                    "user_model_cluster {} is outside -1..=63",
+                    c.user_model_cluster
+                ));
+            }
+            return Ok(());
+        }
+        let Some(s) = session else {
+            return Err("no session is running".into());
+        };
+        if s.id != c.session_id {
+            return Err(if running {
+                format!("wrong session: session {:?} is running", s.id)
+            } else {
+                "no session is running".into()
+            });
+        }
+        if !running {
+            return Err(format!("session has already ended ({})", self.ended_name()));
+        }
+        if c.command != TherapistCommand::EMERGENCY_STOP {
+            check_order(s, c)?;
+        }
+        match c.command {
+            TherapistCommand::PAUSE if s.paused_since.is_some() => Err("already paused".into()),
+            TherapistCommand::RESUME if s.paused_since.is_none() => Err("not paused".into()),
+            TherapistCommand::OVERRIDE_LEVEL => {
+                if Level::new(c.level.into()).is_err() {
+                    return Err(format!("level {} is not 1, 2 or 3", c.level));
+                }
+                if self.override_target() > self.sequences() {
+                    return Err("no sequence is left to override".into());
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    fn ended_name(&self) -> &'static str {
+        match self.phase {
+            Phase::Ended(SessionEnd::Finished) => "finished",
+            Phase::Ended(SessionEnd::EmergencyStopped) => "emergency-stopped",
+            Phase::Ended(SessionEnd::NodeShutdown) => "node shut down",
+            _ => "stopped",
+        }
+    }
+
+    pub(super) fn sequences(&self) -> u8 {
+        self.params.sequences_per_session as u8
+    }
+
+    /// The sequence an override now applies to: the one being decided, else the next.
+    fn override_target(&self) -> u8 {
+        let index = self.session.as_ref().map_or(1, |s| s.index);
+        if self.phase == Phase::Deciding {
+            index
+        } else {
+            index + 1
+        }
+    }
+
+    fn start_session(&mut self, c: &TherapistCommand, now: i64) {
+        self.used_sessions.insert(c.session_id.clone());
+        self.engagement.clear();
+        self.timers.clear();
+        self.current = Current::default();
+        self.session = Some(Session {
+            id: c.session_id.clone(),
+            user_id: c.user_id.clone(),
+            cluster: c.user_model_cluster,
+            last_command_id: c.command_id,
+            rng: SessionRng::new(self.params.seed, &c.session_id),
+            state: State::START,
+            index: 1,
+            next_sequence_id: 1,
+            pending_override: None,
+            paused_since: None,
+            talk_start_ns: now,
+            started_ns: now,
+            results: Vec::new(),
+            closed_task: None,
+            fallbacks: 0,
+            overrides: 0,
+            rejected_commands: 0,
+            rejected_answers: 0,
+        });
+        self.log(
+            LogLevel::Info,
+            format!(
+                "session {:?} started for user {:?} (cluster {}), command {}",
+                c.session_id, c.user_id, c.user_model_cluster, c.command_id
+            ),
+        );
+        self.out.push(crate::protocol::Output::LiveLine(format!(
+            "session {:?} started for user {:?} (cluster {})",
+            c.session_id, c.user_id, c.user_model_cluster
+        )));
+        self.set_phase(
+            Phase::Deciding,
+            format!(
+                "session started: introduction, deciding sequence 1/{}",
+                self.sequences()
+            ),
+            now,
+        );
+        let intro = self.utterances.intro();
+        self.act(intro);
+        let at = now + self.scaled_ns(self.params.intro_time_s);
+        self.set_timer(Timer::SpeechDone, at);
+        self.request_decision(now);
+    }
+
+    fn pause(&mut self, command_id: u64, now: i64) {
+        if let Some(s) = self.session.as_mut() {
+            s.paused_since = Some(now);
+        }
+        match self.phase {
+            Phase::GivingFeedback | Phase::SayingSequence => {
+                // A half-said sequence is not fair to the child: say it again on resume.
+                self.drop_timers(|t| {
+                    !matches!(
+                        t,
+                        Timer::FeedbackDone | Timer::Word(_) | Timer::SequenceSaid
+                    )
+                });
+            }
+            Phase::WaitingForAnswer => {
+                self.drop_timers(|t| *t != Timer::AnswerTimeout);
+                self.current.answer_left_ns = Some((self.current.answer_deadline_ns - now).max(0));
+            }
+            _ => {}
+        }
+        self.status = format!("paused by the therapist (command {command_id})");
+        self.publish_state(now);
+    }
+
+    fn resume(&mut self, now: i64) {
+        let paused_for = self
+            .session
+            .as_mut()
+            .and_then(|s| s.paused_since.take())
+            .map_or(0, |since| now - since);
+        self.log(
+            LogLevel::Info,
+            format!("resumed after {:.1} s", paused_for as f64 * 1e-9),
+        );
+        match self.phase {
+            Phase::GivingFeedback | Phase::SayingSequence => self.start_presentation(now),
+            Phase::WaitingForAnswer => {
+                let left = self.current.answer_left_ns.take().unwrap_or(0);
+                self.current.answer_deadline_ns = now + left;
+                self.set_timer(Timer::AnswerTimeout, now + left);
+                self.status = "resumed: waiting for the answer".into();
+                self.publish_state(now);
+            }
+            _ => {
+                self.status = "resumed".into();
+                self.publish_state(now);
+                self.maybe_present(now);
+            }
+        }
+    }
+
+    fn override_level(&mut self, level: u8, now: i64) {
+        let Ok(level) = Level::new(level.into()) else {
+            return;
+        };
+        let target = self.override_target();
+        if let Some(s) = self.session.as_mut() {
+            s.pending_override = Some((target, level));
+        }
+        self.log(
+            LogLevel::Info,
+            format!("sequence {target} set to {level} by the therapist"),
+        );
+        if self.phase == Phase::Deciding {
+            self.apply_override(now);
+            self.maybe_present(now);
+        } else {
+            self.status = format!("next sequence ({target}) set to {level} by the therapist");
+            self.publish_state(now);
+        }
+    }
+}
+
+/// Command ids must increase within a session.
+fn check_order(s: &Session, c: &TherapistCommand) -> Result<(), String> {
+    if c.command_id == s.last_command_id {
+        return Err(format!("duplicate command id {}", c.command_id));
+    }
+    if c.command_id < s.last_command_id {
+        return Err(format!(
+            "stale command id {} (last accepted {})",
+            c.command_id, s.last_command_id
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,152 @@
+//! Getting the action for the current sequence: a therapist override wins, else the policy's
+//! decision if it comes in time and fits the state, else the safe fallback (same level, no
+//! feedback; level 1 on the first sequence).
+
+use super::{GameManager, Phase, Plan, Timer};
+use crate::live_line::decision_reason;
+use crate::protocol::{LogLevel, Output};
+use qt_therapy_msgs::{BehaviourState, DecideActionRequest, DecideActionResponse, Validate};
+use sequence_game::{Action, Feedback, Level};
+
+impl GameManager {
+    /// Asks the policy for the current sequence's action, unless the therapist already chose.
+    pub(super) fn request_decision(&mut self, now: i64) {
+        if self.apply_override(now) {
+            return;
+        }
+        let Some(s) = self.session.as_ref() else {
+            return;
+        };
+        let request_id = self.next_request_id;
+        self.next_request_id += 1;
+        let request = DecideActionRequest {
+            session_id: s.id.clone(),
+            user_id: s.user_id.clone(),
+            user_model_cluster: s.cluster,
+            state: BehaviourState::from_state(s.state),
+            step: s.index,
+        };
+        let deadline_ns = now + (self.params.policy_deadline_s * 1e9).round() as i64;
+        self.current.request_id = Some(request_id);
+        self.out.push(Output::Decide {
+            request_id,
+            request,
+            deadline_ns,
+        });
+        self.set_timer(Timer::PolicyDeadline { request_id }, deadline_ns);
+    }
+
+    /// Uses a pending override for the current sequence; true if there was one.
+    pub(super) fn apply_override(&mut self, now: i64) -> bool {
+        let Some(s) = self.session.as_mut() else {
+            return false;
+        };
+        let Some((index, level)) = s.pending_override else {
+            return false;
+        };
+        if index != s.index {
+            return false;
+        }
+        s.pending_override = None;
+        s.overrides += 1;
+        // A policy answer still on its way is ignored: the override always wins.
+        self.current.request_id = None;
+        self.current.plan = Some(Plan {
+            action: Action::SetLevel(level),
+            level,
+            feedback: Feedback::None,
+            overridden: true,
+            fallback: false,
+            reason: "therapist override".into(),
+        });
+        self.status = format!("sequence {index}: {level} set by the therapist");
+        self.publish_state(now);
+        true
+    }
+
+    pub(super) fn on_decision(
+        &mut self,
+        request_id: u64,
+        response: Result<DecideActionResponse, String>,
+        now: i64,
+    ) {
+        if self.phase != Phase::Deciding || self.current.request_id != Some(request_id) {
+            self.log(
+                LogLevel::Info,
+                format!("ignored a late or superseded policy answer (request {request_id})"),
+            );
+            return;
+        }
+        self.current.request_id = None;
+        let plan = match response {
+            Err(reason) => Err(format!("policy call failed: {reason}")),
+            Ok(r) => self.plan_from_decision(&r),
+        };
+        match plan {
+            Ok(plan) => {
+                self.current.plan = Some(plan);
+                self.maybe_present(now);
+            }
+            Err(reason) => self.fall_back(reason, now),
+        }
+    }
+
+    /// The plan a policy answer gives, or why it cannot be used.
+    fn plan_from_decision(&self, r: &DecideActionResponse) -> Result<Plan, String> {
+        let s = self.session.as_ref().ok_or("no session")?;
+        if !r.ok {
+            return Err(format!("policy refused: {}", r.error));
+        }
+        r.validate().map_err(|e| e.to_string())?;
+        let d = &r.decision;
+        if d.step != s.index {
+            return Err(format!(
+                "decision is for step {}, expected {}",
+                d.step, s.index
+            ));
+        }
+        let action = Action::new(d.action.into()).map_err(|e| e.to_string())?;
+        let (level, feedback) = action
+            .apply(s.state)
+            .ok_or_else(|| format!("{action} is not allowed in state {}", s.state))?;
+        if d.level != level.get() || d.feedback != feedback as u8 {
+            return Err(format!(
+                "decision says level {} feedback {} but {action} gives {level} feedback {}",
+                d.level, d.feedback, feedback as u8
+            ));
+        }
+        Ok(Plan {
+            action,
+            level,
+            feedback,
+            overridden: false,
+            fallback: false,
+            reason: decision_reason(d),
+        })
+    }
+
+    /// Same level, no feedback (level 1 on the first sequence).
+    pub(super) fn fall_back(&mut self, reason: String, now: i64) {
+        let Some(s) = self.session.as_mut() else {
+            return;
+        };
+        let level = s.state.level().unwrap_or(Level::ONE);
+        s.fallbacks += 1;
+        let index = s.index;
+        self.log(
+            LogLevel::Warn,
+            format!("sequence {index}: safe fallback ({level}, no feedback): {reason}"),
+        );
+        self.current.plan = Some(Plan {
+            action: Action::SetLevel(level),
+            level,
+            feedback: Feedback::None,
+            overridden: false,
+            fallback: true,
+            reason: format!("safe fallback: {reason}"),
+        });
+        self.status = format!("policy fallback for sequence {index}: {reason}");
+        self.publish_state(now);
+        self.maybe_present(now);
+    }
+}

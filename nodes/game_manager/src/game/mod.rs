@@ -1,0 +1,290 @@
+//! The session state machine, sans-IO: `handle(input, now)` returns what to do, in order.
+//! One session at a time: decide (policy, override or fallback) -> feedback -> say the
+//! sequence -> tablet task -> answer or timeout -> score with engagement -> next, x omega.
+//! The therapist can start, pause, resume, stop, override the next level or emergency-stop.
+
+mod commands;
+mod decide;
+mod outcome;
+mod present;
+#[cfg(test)]
+mod tests;
+
+use crate::params::{GameManagerParams, ParamError};
+use crate::protocol::{Input, LogLevel, Output};
+use crate::scoring::EngagementLog;
+use crate::sequence::SessionRng;
+use crate::session_file::SessionEnd;
+use crate::utterances::{RobotAct, Utterances};
+use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::{GameState, SequenceResult};
+use sequence_game::{Action, Emotion, Feedback, Level, State};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// Where the game is (the GameState phase follows from it, PAUSED aside).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Idle,
+    /// Saying the intro or a reaction, and getting the next action.
+    Deciding,
+    GivingFeedback,
+    SayingSequence,
+    WaitingForAnswer,
+    /// Answer in (or timed out); waiting for the last engagement windows of the period.
+    Settling,
+    Ended(SessionEnd),
+}
+
+/// What a timer is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Timer {
+    PolicyDeadline { request_id: u64 },
+    SpeechDone,
+    FeedbackDone,
+    Word(usize),
+    SequenceSaid,
+    AnswerTimeout,
+    Settled,
+}
+
+/// The action chosen for the current sequence, and why.
+#[derive(Debug, Clone, PartialEq)]
+struct Plan {
+    action: Action,
+    level: Level,
+    feedback: Feedback,
+    overridden: bool,
+    fallback: bool,
+    reason: String,
+}
+
+/// The sequence being set up or played.
+#[derive(Debug, Clone, Default)]
+struct Current {
+    request_id: Option<u64>,
+    plan: Option<Plan>,
+    speech_done: bool,
+    feedback_line: Option<usize>,
+    sequence: Vec<Emotion>,
+    words_started_ns: i64,
+    sequence_id: u32,
+    task_sent_ns: i64,
+    answer_deadline_ns: i64,
+    /// Answer time left, while paused.
+    answer_left_ns: Option<i64>,
+    answer: Option<Vec<Emotion>>,
+    response_time: f32,
+    answered_ns: i64,
+    timed_out: bool,
+    rejected_answers: u32,
+}
+
+/// The session under way, or the last one.
+#[derive(Debug, Clone)]
+struct Session {
+    id: String,
+    user_id: String,
+    cluster: i32,
+    last_command_id: u64,
+    rng: SessionRng,
+    /// MDP state before the next action.
+    state: State,
+    /// 1-based index of the current sequence.
+    index: u8,
+    next_sequence_id: u32,
+    /// (sequence index, level) the therapist set.
+    pending_override: Option<(u8, Level)>,
+    paused_since: Option<i64>,
+    /// Start of the current engagement period: end of the previous answer, or session start.
+    talk_start_ns: i64,
+    started_ns: i64,
+    results: Vec<SequenceResult>,
+    /// The last task closed (answered or timed out), to name late and repeated answers.
+    closed_task: Option<(u32, bool)>,
+    fallbacks: u32,
+    overrides: u32,
+    rejected_commands: u32,
+    rejected_answers: u32,
+}
+
+/// The game manager core.
+pub struct GameManager {
+    params: GameManagerParams,
+    utterances: Utterances,
+    phase: Phase,
+    session: Option<Session>,
+    current: Current,
+    used_sessions: BTreeSet<String>,
+    engagement: EngagementLog,
+    timers: BTreeMap<u64, Timer>,
+    next_timer_id: u64,
+    next_request_id: u64,
+    status: String,
+    out: Vec<Output>,
+}
+
+impl GameManager {
+    pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
+        params.validate()?;
+        Ok(GameManager {
+            utterances: Utterances::from_params(&params),
+            params,
+            phase: Phase::Idle,
+            session: None,
+            current: Current::default(),
+            used_sessions: BTreeSet::new(),
+            engagement: EngagementLog::default(),
+            timers: BTreeMap::new(),
+            next_timer_id: 1,
+            next_request_id: 1,
+            status: "waiting for a therapist to start a session".into(),
+            out: Vec::new(),
+        })
+    }
+
+    pub fn params(&self) -> &GameManagerParams {
+        &self.params
+    }
+
+    /// The first state to publish (transient-local, so consoles see an idle game at once).
+    pub fn initial_outputs(&mut self, now: i64) -> Vec<Output> {
+        self.publish_state(now);
+        std::mem::take(&mut self.out)
+    }
+
+    /// The session under way or last played, and its current sequence (for log spans).
+    pub fn session_id(&self) -> Option<&str> {
+        self.session.as_ref().map(|s| s.id.as_str())
+    }
+
+    pub fn sequence_index(&self) -> u8 {
+        self.session.as_ref().map_or(0, |s| s.index)
+    }
+
+    /// True while a session runs (not idle, not ended).
+    pub fn session_running(&self) -> bool {
+        !matches!(self.phase, Phase::Idle | Phase::Ended(_))
+    }
+
+    /// Feeds one input at message time `now` (ns); returns what to do, in order.
+    pub fn handle(&mut self, input: Input, now: i64) -> Vec<Output> {
+        match input {
+            Input::Command(c) => self.on_command(c, now),
+            Input::Answer(a) => self.on_answer(a, now),
+            Input::Engagement(e) => {
+                if self.session_running() {
+                    self.engagement.push(&e);
+                }
+            }
+            Input::Decision {
+                request_id,
+                response,
+            } => self.on_decision(request_id, Ok(response), now),
+            Input::DecisionFailed { request_id, reason } => {
+                self.on_decision(request_id, Err(reason), now)
+            }
+            Input::TimerFired { id } => {
+                if let Some(timer) = self.timers.remove(&id) {
+                    self.on_timer(timer, now);
+                }
+            }
+            Input::Shutdown { reason } => {
+                if self.session_running() {
+                    self.end_session(SessionEnd::NodeShutdown, &reason, now);
+                }
+            }
+        }
+        std::mem::take(&mut self.out)
+    }
+
+    fn scaled_ns(&self, seconds: f64) -> i64 {
+        (seconds * self.params.time_scale * 1e9).round() as i64
+    }
+
+    fn set_timer(&mut self, timer: Timer, at_ns: i64) {
+        let id = self.next_timer_id;
+        self.next_timer_id += 1;
+        self.timers.insert(id, timer);
+        self.out.push(Output::SetTimer { id, at_ns });
+    }
+
+    /// Forgets timers of one kind (they still fire, and are then ignored).
+    fn drop_timers(&mut self, keep: impl Fn(&Timer) -> bool) {
+        self.timers.retain(|_, t| keep(t));
+    }
+
+    fn paused(&self) -> bool {
+        self.session
+            .as_ref()
+            .is_some_and(|s| s.paused_since.is_some())
+    }
+
+    fn log(&mut self, level: LogLevel, message: String) {
+        self.out.push(Output::Log { level, message });
+    }
+
+    fn act(&mut self, act: RobotAct) {
+        if let Some(e) = act.emotion {
+            self.out.push(Output::ShowEmotion(e));
+        }
+        if let Some(g) = act.gesture {
+            self.out.push(Output::PlayGesture(g));
+        }
+        self.out.push(Output::Say(act.speech));
+    }
+
+    fn set_phase(&mut self, phase: Phase, status: String, now: i64) {
+        self.phase = phase;
+        self.status = status;
+        self.publish_state(now);
+    }
+
+    /// A rejected input: counted, logged, and shown in GameState.status.
+    fn reject(&mut self, what: String, now: i64) {
+        self.log(LogLevel::Warn, format!("rejected {what}"));
+        self.status = format!("rejected {what}");
+        self.publish_state(now);
+    }
+
+    fn publish_state(&mut self, now: i64) {
+        let phase = if self.paused() && self.session_running() {
+            GameState::PAUSED
+        } else {
+            match self.phase {
+                Phase::Idle => GameState::IDLE,
+                Phase::Deciding => GameState::DECIDING,
+                Phase::GivingFeedback => GameState::GIVING_FEEDBACK,
+                Phase::SayingSequence => GameState::SAYING_SEQUENCE,
+                Phase::WaitingForAnswer | Phase::Settling => GameState::WAITING_FOR_ANSWER,
+                Phase::Ended(SessionEnd::Finished) => GameState::FINISHED,
+                Phase::Ended(SessionEnd::EmergencyStopped) => GameState::EMERGENCY_STOPPED,
+                Phase::Ended(_) => GameState::STOPPED,
+            }
+        };
+        let plan = self.current.plan.as_ref();
+        let msg = match &self.session {
+            None => GameState {
+                header: Header::at(Time::from_nanos(now)),
+                phase,
+                user_model_cluster: -1,
+                status: self.status.clone(),
+                ..Default::default()
+            },
+            Some(s) => GameState {
+                header: Header::at(Time::from_nanos(now)),
+                phase,
+                session_id: s.id.clone(),
+                user_id: s.user_id.clone(),
+                user_model_cluster: s.cluster,
+                sequence_index: s.index,
+                level: plan.map_or(s.state.level, |p| p.level.get()),
+                feedback: plan.map_or(s.state.feedback, |p| p.feedback) as u8,
+                last_score: s.state.previous_score,
+                policy_fallback: plan.is_some_and(|p| p.fallback),
+                status: self.status.clone(),
+            },
+        };
+        self.out.push(Output::State(msg));
+    }
+}

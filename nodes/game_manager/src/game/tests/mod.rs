@@ -1,0 +1,6 @@
+//! Unit tests of the session state machine, driven through a simulated clock.
+
+mod answers;
+mod commands;
+mod harness;
+mod session;

@@ -1,0 +1,18 @@
+//! The game manager of the QTrobot emotion-sequence memorisation game. Its core
+//! ([`GameManager`]) is a sans-IO state machine: therapist commands, tablet answers,
+//! engagement, policy answers and timer firings in; robot speech, faces and gestures, tablet
+//! tasks, game states, sequence results, policy requests, timer requests, session-file
+//! records and log lines out. `src/main.rs` connects it to DDS.
+
+pub mod game;
+pub mod live_line;
+pub mod params;
+pub mod protocol;
+pub mod scoring;
+pub mod sequence;
+pub mod session_file;
+pub mod utterances;
+
+pub use game::GameManager;
+pub use params::{GameManagerParams, ParamError};
+pub use protocol::{Input, LogLevel, Output};

@@ -1,0 +1,243 @@
+//! `game_manager run`: the game manager node. Moves messages between DDS and the sans-IO core
+//! (`GameManager`): therapist commands, tablet answers and engagement in; robot speech, faces,
+//! gestures, tablet tasks, game states and results out; DecideAction calls with a deadline;
+//! the core's timers; session files; one live line per sequence on stdout.
+//!   game_manager run [--sessions-dir DIR] [--params-file params/game_manager.yaml]
+
+use anyhow::Context as _;
+use clap::{Parser, Subcommand};
+use game_manager::session_file::SessionFiles;
+use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
+use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
+use qt_therapy_msgs::std_msgs::StringMsg;
+use qt_therapy_msgs::topics::{
+    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH,
+    SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
+};
+use qt_therapy_msgs::{DecideAction, GameState, SequenceResult, TabletTask};
+use std::collections::BTreeSet;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::Duration;
+use tokio::sync::mpsc;
+
+#[derive(Parser)]
+#[command(about = "The emotion-sequence memorisation game on QTrobot, over ROS 2 / DDS")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the node until SIGINT/SIGTERM (a running session is then saved as stopped).
+    Run(RunArgs),
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Directory of the session files [default: the sessions_dir parameter].
+    #[arg(long)]
+    sessions_dir: Option<PathBuf>,
+    #[command(flatten)]
+    shell: ShellOptions,
+}
+
+/// The node's publishers.
+struct Outboxes {
+    speech: Outbox<StringMsg>,
+    emotion: Outbox<StringMsg>,
+    gesture: Outbox<StringMsg>,
+    task: Outbox<TabletTask>,
+    state: Outbox<GameState>,
+    result: Outbox<SequenceResult>,
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let Command::Run(args) = Cli::parse().command;
+    let (mut shell, mut params): (NodeShell, GameManagerParams) =
+        NodeShell::start("game_manager", &args.shell)?;
+    if let Some(dir) = &args.sessions_dir {
+        params.sessions_dir = dir.display().to_string();
+    }
+    let result = run(&mut shell, params).await;
+    shell.stop().await;
+    result
+}
+
+async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result<()> {
+    let mut core =
+        GameManager::new(params.clone()).context("checking the game_manager parameters")?;
+    let mut files = SessionFiles::new(&params.sessions_dir);
+    let out = Outboxes {
+        speech: shell.publisher(ROBOT_SPEECH)?,
+        emotion: shell.publisher(ROBOT_EMOTION)?,
+        gesture: shell.publisher(ROBOT_GESTURE)?,
+        task: shell.publisher(TABLET_TASK)?,
+        state: shell.publisher(GAME_STATE)?,
+        result: shell.publisher(SEQUENCE_RESULT)?,
+    };
+    let mut commands = shell.subscribe(THERAPIST_COMMAND, 64)?;
+    let mut answers = shell.subscribe(TABLET_ANSWER, 64)?;
+    let mut engagement = shell.subscribe(EXPECTED_ENGAGEMENT, 256)?;
+    let policy = shell.client(DECIDE_ACTION)?;
+    let (decided_tx, mut decided) = mpsc::channel::<Input>(16);
+    // (due time, timer id) of the timers the core asked for.
+    let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
+    if params.policy_startup_wait_s > 0.0 {
+        let wait = Duration::from_secs_f64(params.policy_startup_wait_s);
+        tokio::select! {
+            found = shell.wait_for_service(&policy, wait) => {
+                if found {
+                    tracing::info!("behaviour policy reachable on {}", DECIDE_ACTION.name);
+                } else {
+                    tracing::warn!(
+                        "no {} server within {wait:?}: starting anyway; sequences use the safe \
+                         fallback until it answers",
+                        DECIDE_ACTION.name
+                    );
+                }
+            }
+            _ = shell.shutdown_signal() => return Ok(()),
+        }
+    }
+    tracing::info!(sessions_dir = %params.sessions_dir, language = %params.language,
+        time_scale = params.time_scale, "game manager ready");
+
+    let initial = core.initial_outputs(now_nanos());
+    let mut ctx = Dispatch {
+        out: &out,
+        files: &mut files,
+        timers: &mut timers,
+        policy: &policy,
+        decided: &decided_tx,
+    };
+    ctx.apply(initial);
+    let stop = shell.shutdown_signal();
+    tokio::pin!(stop);
+    loop {
+        let next_timer = ctx.timers.first().map(|(at, _)| *at);
+        let wait = next_timer.map_or(Duration::from_secs(3600), |at| {
+            Duration::from_nanos(u64::try_from(at - now_nanos()).unwrap_or(0))
+        });
+        let input = tokio::select! {
+            _ = &mut stop => {
+                let outputs = core.handle(Input::Shutdown { reason: "node shut down (signal)".into() }, now_nanos());
+                ctx.apply(outputs);
+                break;
+            }
+            Some(c) = commands.recv() => Input::Command(c),
+            Some(a) = answers.recv() => Input::Answer(a),
+            Some(e) = engagement.recv() => Input::Engagement(e),
+            Some(d) = decided.recv() => d,
+            _ = tokio::time::sleep(wait), if next_timer.is_some() => {
+                match ctx.timers.pop_first() {
+                    Some((_, id)) => Input::TimerFired { id },
+                    None => continue,
+                }
+            }
+        };
+        let span = tracing::info_span!(
+            "session",
+            id = core.session_id().unwrap_or("-"),
+            sequence = core.sequence_index()
+        );
+        let _entered = span.enter();
+        let outputs = core.handle(input, now_nanos());
+        ctx.apply(outputs);
+    }
+    Ok(())
+}
+
+/// Carries out the core's outputs, in order.
+struct Dispatch<'a> {
+    out: &'a Outboxes,
+    files: &'a mut SessionFiles,
+    timers: &'a mut BTreeSet<(i64, u64)>,
+    policy: &'a node_shell::ServiceClient<DecideAction>,
+    decided: &'a mpsc::Sender<Input>,
+}
+
+impl Dispatch<'_> {
+    fn apply(&mut self, outputs: Vec<Output>) {
+        for o in outputs {
+            match o {
+                Output::Say(s) => {
+                    self.out.speech.send(StringMsg { data: s });
+                }
+                Output::ShowEmotion(s) => {
+                    self.out.emotion.send(StringMsg { data: s });
+                }
+                Output::PlayGesture(s) => {
+                    self.out.gesture.send(StringMsg { data: s });
+                }
+                Output::Task(t) => {
+                    self.out.task.send(t);
+                }
+                Output::State(s) => {
+                    self.out.state.send(s);
+                }
+                Output::Result(r) => {
+                    self.out.result.send(r);
+                }
+                Output::Decide {
+                    request_id,
+                    request,
+                    deadline_ns,
+                } => {
+                    let client = self.policy.clone();
+                    let tx = self.decided.clone();
+                    // The core falls back at the deadline itself; this only bounds the call.
+                    let timeout =
+                        Duration::from_nanos(u64::try_from(deadline_ns - now_nanos()).unwrap_or(0))
+                            + Duration::from_millis(500);
+                    tokio::spawn(async move {
+                        let input = match client.call(request, timeout).await {
+                            Ok(response) => Input::Decision {
+                                request_id,
+                                response,
+                            },
+                            Err(e) => Input::DecisionFailed {
+                                request_id,
+                                reason: e.to_string(),
+                            },
+                        };
+                        let _ = tx.send(input).await;
+                    });
+                }
+                Output::SetTimer { id, at_ns } => {
+                    self.timers.insert((at_ns, id));
+                }
+                Output::Record(r) => match self.files.append(&r) {
+                    Ok(path) => tracing::debug!(path = %path.display(), "sequence recorded"),
+                    // Keep the record in the log at least.
+                    Err(e) => tracing::error!(
+                        "{e}; record: {}",
+                        serde_json::to_string(&r).unwrap_or_default()
+                    ),
+                },
+                Output::Summary(s) => match self.files.write_summary(&s) {
+                    Ok(path) => tracing::info!(path = %path.display(), "session summary written"),
+                    Err(e) => tracing::error!(
+                        "{e}; summary: {}",
+                        serde_json::to_string(&s).unwrap_or_default()
+                    ),
+                },
+                Output::LiveLine(line) => {
+                    let mut stdout = std::io::stdout().lock();
+                    let _ = writeln!(stdout, "{line}");
+                    let _ = stdout.flush();
+                }
+                Output::Log {
+                    level: LogLevel::Info,
+                    message,
+                } => tracing::info!("{message}"),
+                Output::Log {
+                    level: LogLevel::Warn,
+                    message,
+                } => tracing::warn!("{message}"),
+            }
+        }
+    }
+}

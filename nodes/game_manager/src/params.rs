@@ -1,0 +1,325 @@
+//! The game manager's parameters (`params/game_manager.yaml`): session shape, robot timings,
+//! deadlines, where session files go, and the robot's lines in English and German.
+//! `Default` is the shipped yaml; `validate` names the key at fault.
+
+use serde::Deserialize;
+
+/// Parameters of the game manager node (flat ROS 2 keys).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GameManagerParams {
+    /// Seed of the emotion sequences and of the choice among feedback lines.
+    pub seed: i64,
+    /// Sequences per session (the paper's omega = 10).
+    pub sequences_per_session: i64,
+    /// Longest run of one emotion in a sequence (the authors: no three identical in a row).
+    pub max_identical_in_a_row: i64,
+    /// Robot speaking time for a sequence of n emotions: base + n * per_emotion seconds.
+    pub speaking_time_base_s: f64,
+    pub speaking_time_per_emotion_s: f64,
+    /// Seconds the robot needs for the introduction, a feedback line, and "well done" /
+    /// "let's try again".
+    pub intro_time_s: f64,
+    pub feedback_time_s: f64,
+    pub reaction_time_s: f64,
+    /// Multiplies every robot timing and the answer timeout (0.1 = ten times faster).
+    pub time_scale: f64,
+    /// Seconds (before time_scale) the child has to answer; a timeout is a wrong answer.
+    pub answer_timeout_s: f64,
+    /// Seconds the policy has to answer DecideAction before the safe fallback is used.
+    pub policy_deadline_s: f64,
+    /// At startup, seconds to wait for the DecideAction service before announcing the game
+    /// (a request sent before the service is matched is lost); 0 = do not wait.
+    pub policy_startup_wait_s: f64,
+    /// Seconds after the robot stopped talking that late ExpectedEngagement windows may still
+    /// arrive (the classifier closes a second after its end plus its lateness).
+    pub engagement_wait_s: f64,
+    /// Directory of the session files (JSON lines + summary).
+    pub sessions_dir: String,
+    /// Language of the robot's lines: "en" or "de".
+    pub language: String,
+    pub intro_en: String,
+    pub intro_de: String,
+    pub encouraging_en: Vec<String>,
+    pub encouraging_de: Vec<String>,
+    pub challenging_en: Vec<String>,
+    pub challenging_de: Vec<String>,
+    pub well_done_en: String,
+    pub well_done_de: String,
+    pub try_again_en: String,
+    pub try_again_de: String,
+    pub goodbye_en: String,
+    pub goodbye_de: String,
+    /// The emotion words the robot says, in the order happy, disgusted, sad, angry.
+    pub emotion_words_en: Vec<String>,
+    pub emotion_words_de: Vec<String>,
+    /// QTrobot face animations and gestures that go with the lines.
+    pub intro_gesture: String,
+    pub encouraging_emotion: String,
+    pub encouraging_gesture: String,
+    pub challenging_emotion: String,
+    pub challenging_gesture: String,
+    pub well_done_emotion: String,
+    pub try_again_emotion: String,
+    pub goodbye_gesture: String,
+}
+
+fn strings(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+impl Default for GameManagerParams {
+    fn default() -> Self {
+        GameManagerParams {
+            seed: 42,
+            sequences_per_session: 10,
+            max_identical_in_a_row: 2,
+            speaking_time_base_s: -1.0,
+            speaking_time_per_emotion_s: 3.0,
+            intro_time_s: 6.0,
+            feedback_time_s: 4.0,
+            reaction_time_s: 2.0,
+            time_scale: 1.0,
+            answer_timeout_s: 60.0,
+            policy_deadline_s: 2.0,
+            policy_startup_wait_s: 10.0,
+            engagement_wait_s: 1.5,
+            sessions_dir: "sessions".into(),
+            language: "en".into(),
+            intro_en: "Hello! Let's play a memory game. I will say some emotions. \
+                       Listen carefully and then tap them on the tablet in the same order."
+                .into(),
+            intro_de: "Hallo! Lass uns ein Gedächtnisspiel spielen. Ich sage dir ein paar \
+                       Gefühle. Hör gut zu und tippe sie dann in der gleichen Reihenfolge \
+                       auf dem Tablet an."
+                .into(),
+            encouraging_en: strings(&[
+                "You are doing great, keep going!",
+                "I know you can do it. Let's try another one!",
+            ]),
+            encouraging_de: strings(&[
+                "Das machst du toll, weiter so!",
+                "Ich weiß, dass du das kannst. Noch eine!",
+            ]),
+            challenging_en: strings(&[
+                "Now concentrate, this one is harder!",
+                "Let's see if you can remember this one. Pay attention!",
+            ]),
+            challenging_de: strings(&[
+                "Jetzt konzentrier dich, die nächste ist schwerer!",
+                "Mal sehen, ob du dir diese merken kannst. Pass gut auf!",
+            ]),
+            well_done_en: "Well done!".into(),
+            well_done_de: "Gut gemacht!".into(),
+            try_again_en: "Let's try again.".into(),
+            try_again_de: "Versuchen wir es noch einmal.".into(),
+            goodbye_en: "That was the last one. Thank you for playing with me, goodbye!".into(),
+            goodbye_de: "Das war die letzte. Danke, dass du mit mir gespielt hast, tschüss!".into(),
+            emotion_words_en: strings(&["happy", "disgusted", "sad", "angry"]),
+            emotion_words_de: strings(&["fröhlich", "angeekelt", "traurig", "wütend"]),
+            intro_gesture: "QT/hi".into(),
+            encouraging_emotion: "QT/happy".into(),
+            encouraging_gesture: "QT/clapping".into(),
+            challenging_emotion: "QT/showing_smile".into(),
+            challenging_gesture: "QT/challenge".into(),
+            well_done_emotion: "QT/happy".into(),
+            try_again_emotion: "QT/showing_smile".into(),
+            goodbye_gesture: "QT/bye".into(),
+        }
+    }
+}
+
+/// A parameter the game manager cannot work with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("game_manager parameter {key}: {reason}")]
+pub struct ParamError {
+    pub key: &'static str,
+    pub reason: String,
+}
+
+fn bad(key: &'static str, reason: impl Into<String>) -> Result<(), ParamError> {
+    Err(ParamError {
+        key,
+        reason: reason.into(),
+    })
+}
+
+fn seconds(key: &'static str, v: f64, low: f64, high: f64) -> Result<(), ParamError> {
+    if !(v.is_finite() && v >= low && v <= high) {
+        return bad(
+            key,
+            format!("{v} is not a number of seconds in [{low}, {high}]"),
+        );
+    }
+    Ok(())
+}
+
+impl GameManagerParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if !(1..=10).contains(&self.sequences_per_session) {
+            return bad("sequences_per_session", "must be in 1..=10");
+        }
+        if !(1..=7).contains(&self.max_identical_in_a_row) {
+            return bad("max_identical_in_a_row", "must be in 1..=7");
+        }
+        seconds(
+            "speaking_time_per_emotion_s",
+            self.speaking_time_per_emotion_s,
+            0.0,
+            60.0,
+        )?;
+        seconds(
+            "speaking_time_base_s",
+            self.speaking_time_base_s,
+            -60.0,
+            60.0,
+        )?;
+        if self.speaking_time_base_s + 3.0 * self.speaking_time_per_emotion_s <= 0.0 {
+            return bad(
+                "speaking_time_base_s",
+                "base + 3 * per_emotion must be positive (the shortest sequence takes time)",
+            );
+        }
+        seconds("intro_time_s", self.intro_time_s, 0.0, 600.0)?;
+        seconds("feedback_time_s", self.feedback_time_s, 0.0, 600.0)?;
+        seconds("reaction_time_s", self.reaction_time_s, 0.0, 600.0)?;
+        if !(self.time_scale.is_finite() && self.time_scale > 0.0 && self.time_scale <= 10.0) {
+            return bad(
+                "time_scale",
+                format!("{} is not in (0, 10]", self.time_scale),
+            );
+        }
+        seconds("answer_timeout_s", self.answer_timeout_s, 0.001, 3600.0)?;
+        if self.answer_timeout_s * self.time_scale > 3600.0 {
+            return bad(
+                "answer_timeout_s",
+                "times time_scale must be at most 3600 s",
+            );
+        }
+        seconds("policy_deadline_s", self.policy_deadline_s, 0.001, 60.0)?;
+        seconds(
+            "policy_startup_wait_s",
+            self.policy_startup_wait_s,
+            0.0,
+            600.0,
+        )?;
+        seconds("engagement_wait_s", self.engagement_wait_s, 0.0, 10.0)?;
+        if self.sessions_dir.trim().is_empty() {
+            return bad("sessions_dir", "is empty");
+        }
+        if !matches!(self.language.as_str(), "en" | "de") {
+            return bad(
+                "language",
+                format!("{:?} is not \"en\" or \"de\"", self.language),
+            );
+        }
+        let lines: [(&'static str, &[String]); 4] = [
+            ("encouraging_en", &self.encouraging_en),
+            ("encouraging_de", &self.encouraging_de),
+            ("challenging_en", &self.challenging_en),
+            ("challenging_de", &self.challenging_de),
+        ];
+        for (key, list) in lines {
+            if list.is_empty() || list.iter().any(|l| l.trim().is_empty()) {
+                return bad(key, "needs at least one line and no empty lines");
+            }
+        }
+        for (key, words) in [
+            ("emotion_words_en", &self.emotion_words_en),
+            ("emotion_words_de", &self.emotion_words_de),
+        ] {
+            if words.len() != 4 || words.iter().any(|w| w.trim().is_empty()) {
+                return bad(key, "needs 4 words: happy, disgusted, sad, angry");
+            }
+        }
+        Ok(())
+    }
+
+    /// Robot speaking time for a sequence of `emotions` words, in unscaled seconds.
+    pub fn speaking_time_s(&self, emotions: usize) -> f64 {
+        self.speaking_time_base_s + emotions as f64 * self.speaking_time_per_emotion_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn shipped_yaml_is_the_default_and_valid() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../params/game_manager.yaml");
+        let map = node_shell::params::read_parameter_map(&path, "game_manager")
+            .expect("params/game_manager.yaml readable");
+        let params: GameManagerParams =
+            node_shell::params::parameters_from_map(map, &path, "game_manager")
+                .expect("params/game_manager.yaml fits GameManagerParams");
+        assert_eq!(params, GameManagerParams::default());
+        params.validate().expect("shipped parameters are valid");
+    }
+
+    #[test]
+    fn default_speaking_times_are_the_authors() {
+        let p = GameManagerParams::default();
+        let times: Vec<f64> = [3, 5, 7].iter().map(|n| p.speaking_time_s(*n)).collect();
+        assert_eq!(times, vec![8.0, 14.0, 20.0]);
+    }
+
+    #[test]
+    fn bad_values_name_their_key() {
+        let cases: Vec<(GameManagerParams, &str)> = vec![
+            (
+                GameManagerParams {
+                    sequences_per_session: 11,
+                    ..Default::default()
+                },
+                "sequences_per_session",
+            ),
+            (
+                GameManagerParams {
+                    time_scale: 0.0,
+                    ..Default::default()
+                },
+                "time_scale",
+            ),
+            (
+                GameManagerParams {
+                    language: "fr".into(),
+                    ..Default::default()
+                },
+                "language",
+            ),
+            (
+                GameManagerParams {
+                    speaking_time_base_s: -9.0,
+                    ..Default::default()
+                },
+                "speaking_time_base_s",
+            ),
+            (
+                GameManagerParams {
+                    encouraging_de: vec![],
+                    ..Default::default()
+                },
+                "encouraging_de",
+            ),
+            (
+                GameManagerParams {
+                    emotion_words_en: strings(&["a"]),
+                    ..Default::default()
+                },
+                "emotion_words_en",
+            ),
+            (
+                GameManagerParams {
+                    policy_deadline_s: f64::NAN,
+                    ..Default::default()
+                },
+                "policy_deadline_s",
+            ),
+        ];
+        for (p, key) in cases {
+            assert_eq!(p.validate().map_err(|e| e.key), Err(key));
+        }
+    }
+}

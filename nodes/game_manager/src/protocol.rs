@@ -1,0 +1,84 @@
+//! What goes into and comes out of the game manager's core: messages, service answers and
+//! timer firings in; robot acts, tablet tasks, game states, results, service requests, timer
+//! requests, session-file records and log lines out. Time is message time in nanoseconds.
+
+use crate::session_file::{SequenceRecord, SessionSummary};
+use qt_therapy_msgs::{
+    DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState, SequenceResult,
+    TabletAnswer, TabletTask, TherapistCommand,
+};
+
+/// One event for the core.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    /// From the therapist tablet.
+    Command(TherapistCommand),
+    /// From the child tablet.
+    Answer(TabletAnswer),
+    /// From the engagement classifier.
+    Engagement(ExpectedEngagement),
+    /// The policy answered the request `request_id`.
+    Decision {
+        request_id: u64,
+        response: DecideActionResponse,
+    },
+    /// The call for `request_id` failed (no server, transport error, the caller's deadline).
+    DecisionFailed { request_id: u64, reason: String },
+    /// A timer the core asked for with [`Output::SetTimer`] is due.
+    TimerFired { id: u64 },
+    /// The node is going down: save the session.
+    Shutdown { reason: String },
+}
+
+/// Severity of a log line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogLevel {
+    Info,
+    Warn,
+}
+
+/// One thing the core wants done, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    /// `/qt_robot/speech/say`; an empty string silences the robot.
+    Say(String),
+    /// `/qt_robot/emotion/show`, e.g. `QT/happy`.
+    ShowEmotion(String),
+    /// `/qt_robot/gesture/play`.
+    PlayGesture(String),
+    Task(TabletTask),
+    State(GameState),
+    Result(SequenceResult),
+    /// Call DecideAction; the core falls back on its own at `deadline_ns`.
+    Decide {
+        request_id: u64,
+        request: DecideActionRequest,
+        deadline_ns: i64,
+    },
+    /// Feed back `Input::TimerFired { id }` at `at_ns` (stale timers are ignored by the core,
+    /// so there is nothing to cancel).
+    SetTimer {
+        id: u64,
+        at_ns: i64,
+    },
+    /// Append to the session file and fsync before anything after it.
+    Record(Box<SequenceRecord>),
+    /// Write the session summary.
+    Summary(Box<SessionSummary>),
+    /// The per-sequence line for the operator's terminal.
+    LiveLine(String),
+    Log {
+        level: LogLevel,
+        message: String,
+    },
+}
+
+impl Output {
+    /// True for what makes the robot act (speech, face, gesture).
+    pub fn is_robot(&self) -> bool {
+        matches!(
+            self,
+            Output::Say(_) | Output::ShowEmotion(_) | Output::PlayGesture(_)
+        )
+    }
+}

@@ -1,0 +1,66 @@
+// The pages' words in each shipped language; the bridge sets <html lang> from its parameters.
+"use strict";
+const I18N = {
+  en: {
+    happy: "happy", disgusted: "disgusted", sad: "sad", angry: "angry",
+    listen: "Listen to QT!", your_turn: "Your turn! Tap the faces in order.",
+    thanks: "Thank you!", paused: "Pause", done: "Done", undo: "Back",
+    offline: "Connecting…", finished: "All done, well played!",
+    therapist_title: "Therapist tablet", pin: "PIN", unlock: "Unlock",
+    session: "Session", user_id: "User id", cluster: "Cluster (-1: default)",
+    start: "Start", pause: "Pause", resume: "Resume", stop: "Stop",
+    override: "Next level", estop: "EMERGENCY STOP",
+    game: "Game", phase: "Phase", sequence: "Sequence", level: "Level",
+    feedback: "Feedback", last_score: "Last score", fallback: "Policy fallback",
+    status: "Status", engagement: "Engagement (last minutes)", decisions: "Decisions",
+    results: "Results", step: "Step", state: "State (L,F,PS)", action: "Action",
+    q_values: "Q-values", probability: "p", temperature: "T", mode: "Mode",
+    explored: "explored", greedy: "greedy", outcome: "Outcome", said: "Said",
+    tapped: "Tapped", response_time: "Time (s)", right: "right", wrong: "wrong",
+    timeout: "timeout", yes: "yes", no: "no", none: "none", encouraging: "encouraging",
+    challenging: "challenging", rejected: "Refused", sent: "Sent",
+    encourage: "encourage", challenge: "challenge", encourage_short: "enc", challenge_short: "chal",
+    smoothed: "smoothed", per_second: "per second",
+    phase_idle: "idle", phase_deciding: "deciding", phase_giving_feedback: "feedback",
+    phase_saying_sequence: "robot speaking", phase_waiting_for_answer: "child answering",
+    phase_paused: "paused", phase_finished: "finished", phase_stopped: "stopped",
+    phase_emergency_stopped: "EMERGENCY STOPPED", phase_unknown: "unknown",
+  },
+  de: {
+    happy: "fröhlich", disgusted: "angeekelt", sad: "traurig", angry: "wütend",
+    listen: "Hör QT zu!", your_turn: "Du bist dran! Tippe die Gesichter der Reihe nach.",
+    thanks: "Danke!", paused: "Pause", done: "Fertig", undo: "Zurück",
+    offline: "Verbinde…", finished: "Geschafft, toll gespielt!",
+    therapist_title: "Therapeuten-Tablet", pin: "PIN", unlock: "Entsperren",
+    session: "Sitzung", user_id: "Nutzer-ID", cluster: "Cluster (-1: Standard)",
+    start: "Start", pause: "Pause", resume: "Weiter", stop: "Stopp",
+    override: "Nächstes Level", estop: "NOT-HALT",
+    game: "Spiel", phase: "Phase", sequence: "Sequenz", level: "Level",
+    feedback: "Feedback", last_score: "Letzte Punkte", fallback: "Ersatzstrategie",
+    status: "Status", engagement: "Engagement (letzte Minuten)", decisions: "Entscheidungen",
+    results: "Ergebnisse", step: "Schritt", state: "Zustand (L,F,PS)", action: "Aktion",
+    q_values: "Q-Werte", probability: "p", temperature: "T", mode: "Modus",
+    explored: "erkundet", greedy: "gierig", outcome: "Ergebnis", said: "Gesagt",
+    tapped: "Getippt", response_time: "Zeit (s)", right: "richtig", wrong: "falsch",
+    timeout: "Zeit um", yes: "ja", no: "nein", none: "keins", encouraging: "ermutigend",
+    challenging: "fordernd", rejected: "Abgelehnt", sent: "Gesendet",
+    encourage: "ermutigen", challenge: "fordern", encourage_short: "erm", challenge_short: "ford",
+    smoothed: "geglättet", per_second: "pro Sekunde",
+    phase_idle: "bereit", phase_deciding: "entscheidet", phase_giving_feedback: "Feedback",
+    phase_saying_sequence: "Roboter spricht", phase_waiting_for_answer: "Kind antwortet",
+    phase_paused: "pausiert", phase_finished: "beendet", phase_stopped: "gestoppt",
+    phase_emergency_stopped: "NOT-HALT", phase_unknown: "unbekannt",
+  },
+};
+
+function t(key) {
+  const lang = I18N[document.documentElement.lang] || I18N.en;
+  return lang[key] || I18N.en[key] || key;
+}
+
+// Fills every element carrying data-i18n="key" with its word.
+function translatePage() {
+  for (const el of document.querySelectorAll("[data-i18n]")) {
+    el.textContent = t(el.dataset.i18n);
+  }
+}

@@ -1,0 +1,114 @@
+//! The game side of the core: game states, tasks, decisions, results and engagement from DDS
+//! become what each page shows; a task stays open until it is answered, replaced, or the game
+//! moves to a phase where no answer can count.
+
+use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output};
+use crate::protocol::{
+    DecisionView, EngagementPoint, GameView, ResultView, Role, ServerMessage, TaskView, phase_name,
+};
+use qt_therapy_msgs::{GameState, TabletTask};
+use std::collections::VecDeque;
+
+/// Decisions and results kept for a therapist page that logs in mid-session.
+const HISTORY: usize = 50;
+
+impl Bridge {
+    /// A message from the game side.
+    pub fn dds(&mut self, input: DdsInput, now: Now) -> Vec<Output> {
+        let mut out = Vec::new();
+        match input {
+            DdsInput::GameState(g) => self.game_state(g, &mut out),
+            DdsInput::Task(t) => self.new_task(t, now, &mut out),
+            DdsInput::Decision(d) => {
+                let view = DecisionView::of(&d);
+                push_for_session(&mut self.decisions, view.clone(), |v| &v.session_id);
+                self.broadcast(Role::Therapist, &ServerMessage::Decision(view), &mut out);
+            }
+            DdsInput::Result(r) => {
+                let view = ResultView::of(&r);
+                push_for_session(&mut self.results, view.clone(), |v| &v.session_id);
+                self.broadcast(Role::Therapist, &ServerMessage::Result(view), &mut out);
+            }
+            DdsInput::Engagement(e) => {
+                let point = EngagementPoint::of(&e);
+                if self.engagement.len() >= self.params.engagement_history {
+                    self.engagement.pop_front();
+                }
+                self.engagement.push_back(point.clone());
+                self.broadcast(Role::Therapist, &ServerMessage::Engagement(point), &mut out);
+            }
+        }
+        out
+    }
+
+    fn game_state(&mut self, g: GameState, out: &mut Vec<Output>) {
+        if !g.session_id.is_empty() {
+            self.current_session = Some(g.session_id.clone());
+        }
+        let ended = matches!(
+            g.phase,
+            GameState::IDLE
+                | GameState::FINISHED
+                | GameState::STOPPED
+                | GameState::EMERGENCY_STOPPED
+        );
+        let other_session = self
+            .task
+            .as_ref()
+            .is_some_and(|t| t.task.session_id != g.session_id);
+        self.broadcast(Role::Therapist, &ServerMessage::Game(GameView::of(&g)), out);
+        self.broadcast(
+            Role::Child,
+            &ServerMessage::Game(GameView::for_child(&g)),
+            out,
+        );
+        if self.task.is_some() && (ended || other_session) {
+            self.task = None;
+            let reason = format!("the game is {}", phase_name(g.phase));
+            self.broadcast(Role::Child, &ServerMessage::NoTask { reason }, out);
+        }
+        self.game = Some(g);
+    }
+
+    fn new_task(&mut self, t: TabletTask, now: Now, out: &mut Vec<Output>) {
+        if let Some((session, last)) = &self.last_task {
+            // Transient-local topics re-deliver the last task; older ones are stale.
+            if *session == t.session_id && t.sequence_id <= *last {
+                tracing::debug!(sequence_id = t.sequence_id, "task already seen; ignored");
+                return;
+            }
+        }
+        if let Some(g) = &self.game {
+            let over = matches!(
+                g.phase,
+                GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
+            );
+            if over && g.session_id == t.session_id {
+                tracing::info!(session = %t.session_id, "task for an ended session; ignored");
+                return;
+            }
+        }
+        tracing::info!(session = %t.session_id, sequence_id = t.sequence_id, length = t.length, "new task");
+        self.last_task = Some((t.session_id.clone(), t.sequence_id));
+        self.broadcast(Role::Child, &ServerMessage::Task(TaskView::of(&t)), out);
+        self.task = Some(OpenTask {
+            task: t,
+            received: now.monotonic,
+            answered: false,
+        });
+    }
+}
+
+/// Appends to a per-session history, starting over when the session changes.
+fn push_for_session<T>(list: &mut VecDeque<T>, item: T, session: impl Fn(&T) -> &String) {
+    if list
+        .back()
+        .is_some_and(|last| session(last) != session(&item))
+    {
+        list.clear();
+    }
+    if list.len() >= HISTORY {
+        list.pop_front();
+    }
+    list.push_back(item);
+}

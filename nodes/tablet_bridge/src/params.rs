@@ -1,0 +1,176 @@
+//! The tablet bridge's parameters (`params/tablet_bridge.yaml`) and their checks: where the
+//! pages are served, the therapist PIN, and the limits that keep a misbehaving tablet harmless.
+
+use std::net::SocketAddr;
+
+/// `tablet_bridge.ros__parameters`.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TabletBridgeParams {
+    /// Address the HTTP + WebSocket server listens on.
+    pub http_bind: String,
+    /// The therapist page's PIN (env `QT_TABLET_PIN` overrides it).
+    pub pin: String,
+    /// Page language: `en` or `de`.
+    pub language: String,
+    /// Token bucket per connection: sustained messages per second.
+    pub ws_messages_per_second: f64,
+    /// Token bucket per connection: burst size.
+    pub ws_burst: u32,
+    /// Largest WebSocket text message accepted, in bytes.
+    pub ws_max_message_bytes: usize,
+    /// A connection whose messages were dropped this many times in a row for flooding is closed.
+    pub ws_max_dropped_before_close: u32,
+    /// Most tablet connections at once (both pages together).
+    pub max_clients: usize,
+    /// Wrong PINs allowed per minute over all connections; a connection that gets it wrong this
+    /// many times is closed.
+    pub pin_max_failures: u32,
+    /// Expected-engagement points kept for the therapist's trend chart.
+    pub engagement_history: usize,
+}
+
+impl Default for TabletBridgeParams {
+    fn default() -> Self {
+        TabletBridgeParams {
+            http_bind: "127.0.0.1:8080".into(),
+            pin: "1234".into(),
+            language: "en".into(),
+            ws_messages_per_second: 5.0,
+            ws_burst: 20,
+            ws_max_message_bytes: 4096,
+            ws_max_dropped_before_close: 200,
+            max_clients: 16,
+            pin_max_failures: 5,
+            engagement_history: 300,
+        }
+    }
+}
+
+/// A parameter value the bridge cannot run with.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("params/tablet_bridge.yaml: tablet_bridge.ros__parameters.{key}: {reason}")]
+pub struct InvalidParameter {
+    pub key: &'static str,
+    pub reason: String,
+}
+
+/// The page languages shipped.
+pub const LANGUAGES: [&str; 2] = ["en", "de"];
+
+/// Shortest PIN accepted, so a guessable default cannot slip through by accident.
+pub const MIN_PIN_LEN: usize = 4;
+
+impl TabletBridgeParams {
+    /// Checks every value; the node refuses to start on the first bad one.
+    pub fn validate(&self) -> Result<SocketAddr, InvalidParameter> {
+        let bad = |key, reason: String| Err(InvalidParameter { key, reason });
+        let addr: SocketAddr = match self.http_bind.parse() {
+            Ok(a) => a,
+            Err(e) => {
+                return bad(
+                    "http_bind",
+                    format!("{:?} is not ip:port ({e})", self.http_bind),
+                );
+            }
+        };
+        if self.pin.chars().count() < MIN_PIN_LEN || self.pin.chars().any(char::is_control) {
+            return bad(
+                "pin",
+                format!("must be at least {MIN_PIN_LEN} characters without control characters"),
+            );
+        }
+        if !LANGUAGES.contains(&self.language.as_str()) {
+            return bad(
+                "language",
+                format!("{:?} is not one of {LANGUAGES:?}", self.language),
+            );
+        }
+        if !(self.ws_messages_per_second.is_finite() && self.ws_messages_per_second > 0.0) {
+            return bad("ws_messages_per_second", "must be a positive number".into());
+        }
+        let positive: [(&'static str, usize); 6] = [
+            ("ws_burst", self.ws_burst as usize),
+            ("ws_max_message_bytes", self.ws_max_message_bytes),
+            (
+                "ws_max_dropped_before_close",
+                self.ws_max_dropped_before_close as usize,
+            ),
+            ("max_clients", self.max_clients),
+            ("pin_max_failures", self.pin_max_failures as usize),
+            ("engagement_history", self.engagement_history),
+        ];
+        for (key, v) in positive {
+            if v == 0 {
+                return bad(key, "must be at least 1".into());
+            }
+        }
+        if self.ws_max_message_bytes > 1 << 20 {
+            return bad("ws_max_message_bytes", "must be at most 1 MiB".into());
+        }
+        Ok(addr)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_bad_values_name_their_key() {
+        let p = TabletBridgeParams::default();
+        assert_eq!(p.validate().map(|a| a.port()), Ok(8080));
+        let cases: [(&str, TabletBridgeParams); 5] = [
+            (
+                "http_bind",
+                TabletBridgeParams {
+                    http_bind: "localhost".into(),
+                    ..p.clone()
+                },
+            ),
+            (
+                "pin",
+                TabletBridgeParams {
+                    pin: "12".into(),
+                    ..p.clone()
+                },
+            ),
+            (
+                "language",
+                TabletBridgeParams {
+                    language: "fr".into(),
+                    ..p.clone()
+                },
+            ),
+            (
+                "ws_messages_per_second",
+                TabletBridgeParams {
+                    ws_messages_per_second: f64::NAN,
+                    ..p.clone()
+                },
+            ),
+            (
+                "ws_burst",
+                TabletBridgeParams {
+                    ws_burst: 0,
+                    ..p.clone()
+                },
+            ),
+        ];
+        for (key, params) in cases {
+            let e = params.validate().expect_err(key);
+            assert_eq!(e.key, key);
+            assert!(e.to_string().contains(key), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_shipped_yaml_matches_the_defaults() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../params/tablet_bridge.yaml");
+        let p: TabletBridgeParams =
+            node_shell::params::load_parameters(&path, "tablet_bridge").expect("yaml loads");
+        let d = TabletBridgeParams::default();
+        assert_eq!(format!("{p:?}"), format!("{d:?}"));
+    }
+}

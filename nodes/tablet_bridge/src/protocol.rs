@@ -1,0 +1,379 @@
+//! The JSON the tablet pages and the bridge exchange over the WebSocket. Incoming messages are
+//! parsed strictly (unknown types and fields, wrong types and missing fields are rejected with
+//! serde's reason); outgoing ones are views of the DDS messages the pages need.
+
+use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask};
+use serde::{Deserialize, Serialize};
+
+/// Which page a connection belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    Child,
+    Therapist,
+}
+
+/// A message from a page.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Child page: the tapped sequence for the task `sequence_id`.
+    Answer {
+        sequence_id: u32,
+        answer: Vec<String>,
+        /// Seconds from the task appearing to the submit tap, measured on the tablet.
+        response_time: f64,
+    },
+    /// Therapist page: unlocks the live view.
+    Login { pin: String },
+    /// Therapist page: one command; every command carries the PIN.
+    Command {
+        pin: String,
+        command: CommandKind,
+        #[serde(default)]
+        user_id: Option<String>,
+        #[serde(default)]
+        cluster: Option<i32>,
+        #[serde(default)]
+        level: Option<u8>,
+    },
+}
+
+/// The therapist's commands, as `TherapistCommand` defines them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CommandKind {
+    Start,
+    Pause,
+    Resume,
+    Stop,
+    OverrideLevel,
+    EmergencyStop,
+}
+
+impl CommandKind {
+    pub fn code(self) -> u8 {
+        match self {
+            CommandKind::Start => qt_therapy_msgs::TherapistCommand::START,
+            CommandKind::Pause => qt_therapy_msgs::TherapistCommand::PAUSE,
+            CommandKind::Resume => qt_therapy_msgs::TherapistCommand::RESUME,
+            CommandKind::Stop => qt_therapy_msgs::TherapistCommand::STOP,
+            CommandKind::OverrideLevel => qt_therapy_msgs::TherapistCommand::OVERRIDE_LEVEL,
+            CommandKind::EmergencyStop => qt_therapy_msgs::TherapistCommand::EMERGENCY_STOP,
+        }
+    }
+}
+
+/// Parses one page message; the error is the reason sent back to the page.
+pub fn parse_client_message(text: &str) -> Result<ClientMessage, String> {
+    serde_json::from_str(text).map_err(|e| {
+        let shown: String = e.to_string().chars().take(200).collect();
+        format!("not a valid message: {shown}")
+    })
+}
+
+/// A message to a page.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// Therapist page: send a `login` with the PIN first.
+    LoginRequired,
+    LoggedIn,
+    /// Where the game is (the child page gets the same view).
+    Game(GameView),
+    /// Child page: collect this sequence.
+    Task(TaskView),
+    /// Child page: nothing to answer now.
+    NoTask {
+        reason: String,
+    },
+    /// What the page sent was done.
+    Accepted {
+        what: String,
+    },
+    /// What the page sent was refused, and why.
+    Rejected {
+        reason: String,
+    },
+    /// Therapist page: a command went to the game manager.
+    CommandSent {
+        command: CommandKind,
+        session_id: String,
+        command_id: u64,
+    },
+    Engagement(EngagementPoint),
+    EngagementHistory {
+        points: Vec<EngagementPoint>,
+    },
+    Decision(DecisionView),
+    Result(ResultView),
+}
+
+/// The game-manager phases by name, indexed by `GameState.phase`.
+pub const PHASES: [&str; 9] = [
+    "idle",
+    "deciding",
+    "giving_feedback",
+    "saying_sequence",
+    "waiting_for_answer",
+    "paused",
+    "finished",
+    "stopped",
+    "emergency_stopped",
+];
+
+pub fn phase_name(phase: u8) -> &'static str {
+    PHASES.get(usize::from(phase)).copied().unwrap_or("unknown")
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GameView {
+    pub phase: &'static str,
+    pub session_id: String,
+    pub user_id: String,
+    pub cluster: i32,
+    pub sequence_index: u8,
+    pub level: u8,
+    pub feedback: u8,
+    pub last_score: i8,
+    pub policy_fallback: bool,
+    pub status: String,
+}
+
+impl GameView {
+    pub fn of(g: &GameState) -> Self {
+        GameView {
+            phase: phase_name(g.phase),
+            session_id: g.session_id.clone(),
+            user_id: g.user_id.clone(),
+            cluster: g.user_model_cluster,
+            sequence_index: g.sequence_index,
+            level: g.level,
+            feedback: g.feedback,
+            last_score: g.last_score,
+            policy_fallback: g.policy_fallback,
+            status: g.status.clone(),
+        }
+    }
+
+    /// What the child page may see: no user id, cluster or status text.
+    pub fn for_child(g: &GameState) -> Self {
+        GameView {
+            user_id: String::new(),
+            cluster: -1,
+            status: String::new(),
+            ..GameView::of(g)
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskView {
+    pub sequence_id: u32,
+    pub sequence_index: u8,
+    pub length: u8,
+    pub choices: Vec<String>,
+    pub timeout: f32,
+}
+
+impl TaskView {
+    pub fn of(t: &TabletTask) -> Self {
+        TaskView {
+            sequence_id: t.sequence_id,
+            sequence_index: t.sequence_index,
+            length: t.length,
+            choices: t.choices.clone(),
+            timeout: t.timeout,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EngagementPoint {
+    /// End of the one-second window, seconds since the epoch.
+    pub t: f64,
+    pub source: String,
+    pub has_faces: bool,
+    pub mean: f32,
+    pub smoothed: f32,
+}
+
+impl EngagementPoint {
+    pub fn of(e: &ExpectedEngagement) -> Self {
+        EngagementPoint {
+            t: e.window_end.as_secs_f64(),
+            source: e.source.clone(),
+            has_faces: e.has_faces,
+            mean: e.mean,
+            smoothed: e.smoothed,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DecisionView {
+    pub session_id: String,
+    pub step: u8,
+    /// (L, F, PS) before the action.
+    pub state: [i16; 3],
+    pub action: u8,
+    pub level: u8,
+    pub feedback: u8,
+    pub q_values: Vec<f64>,
+    pub probabilities: Vec<f64>,
+    pub temperature: f64,
+    pub explored: bool,
+    pub exploitation_only: bool,
+    pub model_used: String,
+}
+
+impl DecisionView {
+    pub fn of(d: &Decision) -> Self {
+        // JSON has no NaN or infinity: a non-finite number is shown as null by serde_json,
+        // which the page renders as "–".
+        DecisionView {
+            session_id: d.session_id.clone(),
+            step: d.step,
+            state: [
+                d.state.level.into(),
+                d.state.feedback.into(),
+                d.state.previous_score.into(),
+            ],
+            action: d.action,
+            level: d.level,
+            feedback: d.feedback,
+            q_values: d.q_values.clone(),
+            probabilities: d.probabilities.clone(),
+            temperature: d.temperature,
+            explored: d.explored,
+            exploitation_only: d.exploitation_only,
+            model_used: d.model_used.clone(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ResultView {
+    pub session_id: String,
+    pub sequence_index: u8,
+    pub level: u8,
+    pub feedback: u8,
+    pub overridden: bool,
+    pub sequence: Vec<String>,
+    pub answer: Vec<String>,
+    pub outcome: i8,
+    pub timed_out: bool,
+    pub engagement: f32,
+    pub response_time: f32,
+}
+
+impl ResultView {
+    pub fn of(r: &SequenceResult) -> Self {
+        ResultView {
+            session_id: r.session_id.clone(),
+            sequence_index: r.sequence_index,
+            level: r.level,
+            feedback: r.feedback,
+            overridden: r.overridden,
+            sequence: r.sequence.clone(),
+            answer: r.answer.clone(),
+            outcome: r.outcome,
+            timed_out: r.timed_out,
+            engagement: r.engagement,
+            response_time: r.response_time,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn valid_messages_parse() {
+        assert_eq!(
+            parse_client_message(
+                r#"{"type":"answer","sequence_id":3,"answer":["sad"],"response_time":1.5}"#
+            ),
+            Ok(ClientMessage::Answer {
+                sequence_id: 3,
+                answer: vec!["sad".into()],
+                response_time: 1.5
+            })
+        );
+        assert_eq!(
+            parse_client_message(
+                r#"{"type":"command","pin":"1234","command":"override_level","level":2}"#
+            ),
+            Ok(ClientMessage::Command {
+                pin: "1234".into(),
+                command: CommandKind::OverrideLevel,
+                user_id: None,
+                cluster: None,
+                level: Some(2)
+            })
+        );
+    }
+
+    #[test]
+    fn schema_violations_come_back_with_a_reason() {
+        let cases = [
+            ("not json", "expected"),
+            ("[1,2]", "invalid type"),
+            (r#"{"type":"dance"}"#, "unknown variant `dance`"),
+            (r#"{"sequence_id":1}"#, "missing field `type`"),
+            (
+                r#"{"type":"answer","sequence_id":1,"answer":[]}"#,
+                "missing field `response_time`",
+            ),
+            (
+                r#"{"type":"answer","sequence_id":-1,"answer":[],"response_time":1}"#,
+                "invalid value",
+            ),
+            (
+                r#"{"type":"answer","sequence_id":1,"answer":"sad","response_time":1}"#,
+                "invalid type",
+            ),
+            (
+                r#"{"type":"login","pin":"1","admin":true}"#,
+                "unknown field `admin`",
+            ),
+            (
+                r#"{"type":"command","pin":"1","command":"reboot"}"#,
+                "unknown variant `reboot`",
+            ),
+            (
+                r#"{"type":"command","pin":"1","command":"start","cluster":1e99}"#,
+                "invalid type",
+            ),
+        ];
+        for (text, reason) in cases {
+            let e = parse_client_message(text).expect_err(text);
+            assert!(e.starts_with("not a valid message: "), "{e}");
+            assert!(e.contains(reason), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn server_messages_serialise_with_their_type() {
+        let m = ServerMessage::CommandSent {
+            command: CommandKind::EmergencyStop,
+            session_id: "s".into(),
+            command_id: 7,
+        };
+        let v: serde_json::Value = serde_json::to_value(&m).expect("serialises");
+        assert_eq!(v["type"], "command_sent");
+        assert_eq!(v["command"], "emergency_stop");
+        let g = GameState {
+            phase: GameState::WAITING_FOR_ANSWER,
+            user_id: "child-7".into(),
+            status: "waiting".into(),
+            ..Default::default()
+        };
+        let v = serde_json::to_value(ServerMessage::Game(GameView::for_child(&g))).expect("ok");
+        assert_eq!(v["type"], "game");
+        assert_eq!(v["phase"], "waiting_for_answer");
+        assert_eq!(v["user_id"], "");
+        assert_eq!(phase_name(200), "unknown");
+    }
+}

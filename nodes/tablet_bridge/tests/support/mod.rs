@@ -1,0 +1,307 @@
+//! Helpers of the browser test: child processes killed on drop, the private loopback network
+//! namespace every DDS process runs in, deadlines on every wait, and a WebDriver page.
+
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// `name` on PATH, if it is there.
+pub fn which(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|d| d.join(name))
+        .find(|p| p.is_file())
+}
+
+/// Whether this machine lets us make a network namespace (root, or user namespaces).
+pub fn can_make_network_namespace() -> bool {
+    let ok = |args: &[&str]| {
+        Command::new("unshare")
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    ok(&["-n", "true"]) || ok(&["-rn", "true"])
+}
+
+/// A child process that is killed when the test ends, however it ends.
+pub struct Guard {
+    pub child: Child,
+    pub name: &'static str,
+}
+
+impl Guard {
+    pub fn spawn(name: &'static str, command: &mut Command) -> Guard {
+        let child = command
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {name}: {e}"));
+        Guard { child, name }
+    }
+
+    /// SIGINT, then the exit code within `deadline` (None if it had to be killed).
+    pub fn interrupt(mut self, deadline: Duration) -> Option<i32> {
+        let pid = self.child.id().to_string();
+        let _ = Command::new("kill").args(["-INT", &pid]).status();
+        let start = Instant::now();
+        while start.elapsed() < deadline {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return status.code();
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        eprintln!("{} did not exit within {deadline:?} of SIGINT", self.name);
+        None
+    }
+}
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Polls `probe` every 100 ms until it gives a value, or panics naming `what` at `deadline`.
+pub async fn until<T, F, Fut>(what: &str, deadline: Duration, mut probe: F) -> T
+where
+    F: FnMut() -> Fut,
+    Fut: Future<Output = Option<T>>,
+{
+    let start = Instant::now();
+    loop {
+        if let Some(v) = probe().await {
+            return v;
+        }
+        assert!(
+            start.elapsed() < deadline,
+            "timed out after {deadline:?} waiting for {what}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// Whether something answers on 127.0.0.1:`port`.
+pub fn port_open(port: u16) -> bool {
+    std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+}
+
+/// The raw HTTP/1.1 response head to `request` (tests the server without a browser).
+pub fn raw_http(port: u16, request: &str) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(5)))
+        .expect("timeout");
+    s.write_all(request.as_bytes()).expect("write");
+    let mut buf = [0u8; 4096];
+    let n = s.read(&mut buf).unwrap_or(0);
+    String::from_utf8_lossy(&buf[..n]).into_owned()
+}
+
+/// One browser window (one WebDriver session, its own fresh profile) showing one page.
+pub struct Page {
+    pub client: Client,
+    pub name: &'static str,
+}
+
+impl Page {
+    pub async fn open(
+        name: &'static str,
+        driver_port: u16,
+        profile: &Path,
+        size: (u32, u32),
+    ) -> Page {
+        let args = [
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--disable-dev-shm-usage",
+            "--hide-scrollbars",
+        ];
+        let mut args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        args.push(format!("--user-data-dir={}", profile.display()));
+        args.push(format!("--window-size={},{}", size.0, size.1));
+        let mut caps = serde_json::Map::new();
+        caps.insert("browserName".into(), json!("chrome"));
+        caps.insert("goog:chromeOptions".into(), json!({"args": args}));
+        let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+        let client = ClientBuilder::new(connector)
+            .capabilities(caps)
+            .connect(&format!("http://127.0.0.1:{driver_port}"))
+            .await
+            .unwrap_or_else(|e| panic!("{name}: starting a Chromium session: {e}"));
+        let page = Page { client, name };
+        page.resize(size.0, size.1).await;
+        page
+    }
+
+    pub async fn js(&self, script: &str, args: Vec<Value>) -> Value {
+        self.client
+            .execute(script, args)
+            .await
+            .unwrap_or_else(|e| panic!("{}: script failed: {e}", self.name))
+    }
+
+    /// The text of the first element matching `css` ("" when there is none).
+    pub async fn text(&self, css: &str) -> String {
+        let v = self
+            .js(
+                "const e = document.querySelector(arguments[0]); return e ? e.textContent : '';",
+                vec![json!(css)],
+            )
+            .await;
+        v.as_str().unwrap_or_default().to_string()
+    }
+
+    pub async fn count(&self, css: &str) -> u64 {
+        let v = self
+            .js(
+                "return document.querySelectorAll(arguments[0]).length;",
+                vec![json!(css)],
+            )
+            .await;
+        v.as_u64().unwrap_or(0)
+    }
+
+    pub async fn click(&self, css: &str) {
+        let e = self.client.find(Locator::Css(css)).await;
+        let e = e.unwrap_or_else(|err| panic!("{}: no {css}: {err}", self.name));
+        e.click()
+            .await
+            .unwrap_or_else(|err| panic!("{}: clicking {css}: {err}", self.name));
+    }
+
+    pub async fn type_into(&self, css: &str, text: &str) {
+        let e = self.client.find(Locator::Css(css)).await;
+        let e = e.unwrap_or_else(|err| panic!("{}: no {css}: {err}", self.name));
+        e.clear()
+            .await
+            .unwrap_or_else(|err| panic!("{}: clearing {css}: {err}", self.name));
+        e.send_keys(text)
+            .await
+            .unwrap_or_else(|err| panic!("{}: typing into {css}: {err}", self.name));
+    }
+
+    /// Waits until the text of `css` contains `wanted`.
+    pub async fn wait_text(&self, css: &str, wanted: &str, deadline: Duration) -> String {
+        let what = format!("{}: {css} to contain {wanted:?}", self.name);
+        until(&what, deadline, || async {
+            let t = self.text(css).await;
+            t.contains(wanted).then_some(t)
+        })
+        .await
+    }
+
+    pub async fn wait_count(&self, css: &str, n: u64, deadline: Duration) {
+        let what = format!("{}: {n} × {css}", self.name);
+        until(&what, deadline, || async {
+            (self.count(css).await == n).then_some(())
+        })
+        .await
+    }
+
+    /// Sets the viewport (not the window) to `w` x `h`: a tablet's screen has no browser frame.
+    pub async fn resize(&self, w: u32, h: u32) {
+        let set = |w, h| async move {
+            self.client
+                .set_window_size(w, h)
+                .await
+                .unwrap_or_else(|e| panic!("{}: resizing: {e}", self.name))
+        };
+        set(w, h).await;
+        let inner = self
+            .js("return [window.innerWidth, window.innerHeight];", vec![])
+            .await;
+        let got = |i: usize| inner[i].as_u64().unwrap_or(0) as u32;
+        set(w + w.saturating_sub(got(0)), h + h.saturating_sub(got(1))).await;
+        let inner = self
+            .js("return [window.innerWidth, window.innerHeight];", vec![])
+            .await;
+        assert_eq!(inner, json!([w, h]), "{}: viewport", self.name);
+    }
+
+    /// Saves a PNG screenshot of the viewport as `dir/stem.png`.
+    pub async fn screenshot(&self, dir: &Path, stem: &str) -> PathBuf {
+        let png = self.client.screenshot().await;
+        let png = png.unwrap_or_else(|e| panic!("{}: screenshot: {e}", self.name));
+        let path = dir.join(format!("{stem}.png"));
+        let tmp = dir.join(format!(".{stem}.png.tmp"));
+        std::fs::write(&tmp, png).expect("writing a screenshot");
+        std::fs::rename(&tmp, &path).expect("renaming a screenshot");
+        path
+    }
+
+    /// Opens a second WebSocket from this page to `path`, sends `messages` (strings are sent
+    /// as they are, anything else as JSON), waits `wait_ms` and returns what came back,
+    /// ending with `{"type":"closed",...}` when the bridge closed it.
+    pub async fn raw_socket(&self, path: &str, messages: Vec<Value>, wait_ms: u64) -> Vec<Value> {
+        let script = r#"
+            const [path, messages, waitMs, done] = arguments;
+            const got = [];
+            let finished = false;
+            const finish = () => { if (!finished) { finished = true; done(got); } };
+            const ws = new WebSocket("ws://" + location.host + path);
+            ws.onmessage = (e) => { try { got.push(JSON.parse(e.data)); } catch (x) { got.push(e.data); } };
+            ws.onclose = (e) => { got.push({type: "closed", code: e.code, reason: e.reason}); finish(); };
+            ws.onopen = () => {
+              for (const m of messages) {
+                if (ws.readyState !== WebSocket.OPEN) break;
+                ws.send(typeof m === "string" ? m : JSON.stringify(m));
+              }
+              setTimeout(() => { ws.close(); setTimeout(finish, 500); }, waitMs);
+            };
+        "#;
+        let args = vec![json!(path), json!(messages), json!(wait_ms)];
+        let v = self.client.execute_async(script, args).await;
+        let v = v.unwrap_or_else(|e| panic!("{}: raw socket: {e}", self.name));
+        v.as_array().cloned().unwrap_or_default()
+    }
+}
+
+/// The processes' output files, and the JSON events a process printed.
+pub struct Logs {
+    pub dir: tempfile::TempDir,
+}
+
+impl Logs {
+    pub fn file(&self, name: &str) -> std::fs::File {
+        std::fs::File::create(self.dir.path().join(name)).expect("log file")
+    }
+    pub fn read(&self, name: &str) -> String {
+        std::fs::read_to_string(self.dir.path().join(name)).unwrap_or_default()
+    }
+    pub fn events(&self, name: &str, event: &str) -> Vec<Value> {
+        self.read(name)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .filter(|v| v["event"] == event)
+            .collect()
+    }
+    pub fn dump(&self) -> String {
+        let mut s = String::new();
+        for f in ["peer.out", "peer.err", "bridge.err", "chromedriver.log"] {
+            let text = self.read(f);
+            let tail: Vec<&str> = text.lines().rev().take(60).collect();
+            s += &format!("--- {f} (last lines)\n");
+            for l in tail.into_iter().rev() {
+                s += l;
+                s.push('\n');
+            }
+        }
+        s
+    }
+}
