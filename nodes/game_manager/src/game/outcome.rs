@@ -178,10 +178,13 @@ impl GameManager {
         if self.phase == Phase::Settling {
             self.finalize(now, false);
         }
-        let interrupted = matches!(
-            self.phase,
-            Phase::GivingFeedback | Phase::SayingSequence | Phase::WaitingForAnswer
-        );
+        // After the last answer the phase still reads "waiting"; a finished session has no
+        // interrupted sequence.
+        let interrupted = end != SessionEnd::Finished
+            && matches!(
+                self.phase,
+                Phase::GivingFeedback | Phase::SayingSequence | Phase::WaitingForAnswer
+            );
         if end == SessionEnd::Stopped {
             let act = self.utterances.goodbye();
             self.act(act);

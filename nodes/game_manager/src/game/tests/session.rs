@@ -141,6 +141,7 @@ fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
             .sum::<i32>()
     );
     assert_eq!(s.max_score, 27);
+    assert_eq!(s.interrupted_sequence, None);
     assert_eq!(h.last_state().phase, GameState::FINISHED);
     let lines = h
         .outputs()
