@@ -259,4 +259,14 @@ async fn an_answer_crosses_from_the_child_socket_to_the_publish_channel() {
         server.published.try_recv().is_err(),
         "nothing else was published"
     );
+
+    // Shutting down with both pages still connected ends their connections and the server.
+    if let Some(stop) = server.stop.take() {
+        let _ = stop.send(());
+    }
+    let done = tokio::time::timeout(DEADLINE, &mut server.task).await;
+    assert!(matches!(done, Ok(Ok(Ok(())))), "the server stops: {done:?}");
+    let mut rest = Vec::new();
+    let closed = tokio::time::timeout(DEADLINE, child.0.read_to_end(&mut rest)).await;
+    assert!(closed.is_ok(), "the child's connection was closed");
 }

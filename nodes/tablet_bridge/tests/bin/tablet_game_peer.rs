@@ -74,7 +74,7 @@ async fn main() -> anyhow::Result<()> {
                     let mut e = ExpectedEngagement {
                         header: header_now(),
                         source: "peer/0".into(),
-                        has_faces: second % 15 != 0,
+                        has_faces: !second.is_multiple_of(15),
                         mean,
                         smoothed: mean * 0.8,
                         frame_count: 30,
