@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 /// A fitted projection to `components.len()` dimensions.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Pca {
     pub mean: Vec<f64>,
     /// One row per component, in the original space.
@@ -90,6 +91,14 @@ pub fn nearest(centres: &[Vec<f64>], p: &[f64]) -> usize {
 /// K-means (Lloyd) from `restarts` k-means++ seedings; clusters are numbered by their first
 /// member so the same partition always gets the same labels.
 pub fn kmeans(points: &[Vec<f64>], k: usize, restarts: usize, seed: u64) -> KMeans {
+    if k == 0 || points.len() < k {
+        // Nothing to cluster; the caller checks the sizes and reports them.
+        return KMeans {
+            centres: vec![],
+            labels: vec![0; points.len()],
+            inertia: f64::INFINITY,
+        };
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut best: Option<KMeans> = None;
     for _ in 0..restarts.max(1) {

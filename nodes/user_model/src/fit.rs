@@ -1,40 +1,50 @@
 //! Fitting, as the paper's "User Model" section: user vectors u_j = (P(success|L), mean E|L)
 //! for L = 1..3, PCA to 2-D, K-means into c clusters, then per cluster the GPs F^p(L, F, PS) and
 //! F^e(L, F, PS, O) on the authors' targets (success rate per observed (L, F, PS) group; mean E
-//! per (L, F, PS, O) group, keeping groups with mean < 1.0).
+//! per observed (L, F, PS, O) group, keeping groups with mean < 1.0).
 
 use crate::clustering::{Pca, kmeans};
-use crate::data::InteractionRecord;
-use crate::gp::{GaussianProcess, Kernel};
-use crate::model::*;
-use sequence_game::{Level, ModelInput};
+use crate::data::{InteractionRecord, validate_all};
+use crate::gp::{Kernel, OptimiserOptions};
+use crate::model::{
+    ClusterModel, FORMAT, FORMAT_VERSION, GpComponent, LevelStats, UserModelError, UserModelFile,
+    UserModelSet, UserPoint, encode,
+};
+use sequence_game::{Level, ModelInput, Outcome};
 use std::collections::BTreeMap;
 
 /// How to fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitOptions {
+    /// Number of clusters c.
     pub clusters: usize,
+    /// Seeds K-means and the hyperparameter restarts.
     pub seed: u64,
+    /// K-means runs from different k-means++ seedings; the lowest inertia wins.
     pub kmeans_restarts: usize,
-    /// Initial (or, with `optimise` false, fixed) kernel.
+    /// Initial (or, with `optimise` false, fixed) kernel of every GP.
     pub kernel: Kernel,
+    /// Maximise the log marginal likelihood (else keep `kernel` as given).
     pub optimise: bool,
+    /// Seeded log-uniform starts of the search besides the initial values.
     pub optimiser_restarts: usize,
+    /// Added to the kernel diagonal (scikit-learn's `alpha`).
     pub noise: f64,
+    /// Bounds of every hyperparameter.
     pub bounds: (f64, f64),
+    /// Stored in the file: where the data came from and how it was fitted.
     pub provenance: String,
 }
 
 impl Default for FitOptions {
+    /// The authors' settings (RationalQuadratic, l = 1, α = 1.5 initial, noise 1e-10, bounds
+    /// 1e-5..1e5), with 10 K-means restarts and no optimiser restarts.
     fn default() -> Self {
         FitOptions {
             clusters: 2,
             seed: 7,
             kmeans_restarts: 10,
-            kernel: Kernel::RationalQuadratic {
-                length_scale: 1.0,
-                alpha: 1.5,
-            },
+            kernel: Kernel::AUTHORS,
             optimise: true,
             optimiser_restarts: 0,
             noise: 1e-10,
@@ -53,7 +63,8 @@ fn std(v: &[f64]) -> f64 {
     (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// Each user's vector (P(s|L1), E1, P(s|L2), E2, P(s|L3), E3), in user-id order.
+/// Each user's vector (P(s|L1), E1, P(s|L2), E2, P(s|L3), E3), in user-id order: per level the
+/// user's success rate and mean E over their sequences of that level.
 pub fn user_vectors(
     records: &[InteractionRecord],
 ) -> Result<Vec<(String, [f64; 6])>, UserModelError> {
@@ -66,23 +77,16 @@ pub fn user_vectors(
         let mut v = [0.0; 6];
         for level in Level::ALL {
             let at: Vec<&&InteractionRecord> = recs.iter().filter(|r| r.level == level).collect();
-            if at.is_empty() {
-                return Err(UserModelError::MissingLevel {
-                    user: user.into(),
-                    level: level.get(),
-                    what: "",
-                });
-            }
             let e: Vec<f64> = at.iter().filter_map(|r| r.engagement).collect();
             if e.is_empty() {
                 return Err(UserModelError::MissingLevel {
                     user: user.into(),
                     level: level.get(),
-                    what: " with engagement",
                 });
             }
-            v[2 * level.index()] =
-                at.iter().filter(|r| r.outcome.sign() > 0).count() as f64 / at.len() as f64;
+            v[2 * level.index()] = at.iter().filter(|r| r.outcome == Outcome::Success).count()
+                as f64
+                / at.len() as f64;
             v[2 * level.index() + 1] = mean(&e);
         }
         out.push((user.to_string(), v));
@@ -90,62 +94,43 @@ pub fn user_vectors(
     Ok(out)
 }
 
-fn component(
-    inputs: Vec<Vec<f64>>,
-    targets: Vec<f64>,
-    options: &FitOptions,
-    cluster: usize,
-    name: &'static str,
-    seed: u64,
-) -> Result<GpComponent, UserModelError> {
-    let d = inputs.first().map_or(0, Vec::len);
-    let n = inputs.len().max(1) as f64;
-    let input_mean: Vec<f64> = (0..d)
-        .map(|j| inputs.iter().map(|x| x[j]).sum::<f64>() / n)
-        .collect();
-    let input_scale: Vec<f64> = (0..d)
-        .map(|j| {
-            (inputs
-                .iter()
-                .map(|x| (x[j] - input_mean[j]).powi(2))
-                .sum::<f64>()
-                / n
-                + 1e-8)
-                .sqrt()
-        })
-        .collect();
-    let mut c = GpComponent {
-        kernel: options.kernel,
-        noise: options.noise,
-        input_mean,
-        input_scale,
-        inputs,
-        targets,
-        log_marginal_likelihood: 0.0,
-    };
-    let x: Vec<Vec<f64>> = c.inputs.iter().map(|x| c.standardise(x)).collect();
-    let err = |source| UserModelError::Gp {
-        cluster,
-        component: name,
-        source,
-    };
-    let gp = if options.optimise {
-        GaussianProcess::fit_optimised(
-            x,
-            &c.targets,
-            options.kernel,
-            options.noise,
-            options.bounds,
-            options.optimiser_restarts,
-            seed,
-        )
-    } else {
-        GaussianProcess::fit(x, &c.targets, options.kernel, options.noise)
+/// The GP training sets of one cluster from its records: (F^p inputs, targets), (F^e inputs,
+/// targets), grouped as the authors group them.
+pub type TrainingSets = ((Vec<Vec<f64>>, Vec<f64>), (Vec<Vec<f64>>, Vec<f64>));
+
+/// The authors' targets for one cluster's records.
+pub fn training_sets(records: &[&InteractionRecord]) -> TrainingSets {
+    // Sums and counts per observed group, in table order.
+    let mut success: BTreeMap<usize, (ModelInput, f64, f64)> = BTreeMap::new();
+    let mut engagement: BTreeMap<usize, (ModelInput, Outcome, f64, f64)> = BTreeMap::new();
+    for r in records {
+        let input = ModelInput {
+            level: r.level,
+            feedback: r.feedback,
+            previous_score: r.previous_score,
+        };
+        let s = success.entry(input.index()).or_insert((input, 0.0, 0.0));
+        s.1 += f64::from(u8::from(r.outcome == Outcome::Success));
+        s.2 += 1.0;
+        if let Some(e) = r.engagement {
+            let g = engagement
+                .entry(input.engagement_index(r.outcome))
+                .or_insert((input, r.outcome, 0.0, 0.0));
+            g.2 += e;
+            g.3 += 1.0;
+        }
     }
-    .map_err(err)?;
-    c.kernel = gp.kernel();
-    c.log_marginal_likelihood = gp.log_marginal_likelihood();
-    Ok(c)
+    let p = success
+        .values()
+        .map(|(input, hits, n)| (encode(*input, None), hits / n))
+        .unzip();
+    let e = engagement
+        .values()
+        .map(|(input, outcome, sum, n)| (encode(*input, Some(*outcome)), sum / n))
+        // The authors keep only groups whose mean engagement is below 1.0.
+        .filter(|(_, m)| *m < 1.0)
+        .unzip();
+    (p, e)
 }
 
 /// Fits the user models of `records`.
@@ -153,8 +138,14 @@ pub fn fit(
     records: &[InteractionRecord],
     options: &FitOptions,
 ) -> Result<UserModelSet, UserModelError> {
+    validate_all(records)?;
+    if options.clusters == 0 {
+        return Err(UserModelError::Options(
+            "clusters must be at least 1".into(),
+        ));
+    }
     let users = user_vectors(records)?;
-    if users.len() < 2 * options.clusters.max(1) {
+    if users.len() < 2 * options.clusters {
         return Err(UserModelError::TooFewUsers {
             clusters: options.clusters,
             users: users.len(),
@@ -180,90 +171,74 @@ pub fn fit(
         if members.len() < 2 {
             return Err(UserModelError::ClusterTooSmall {
                 cluster: k,
-                users: members.len(),
+                users: members.iter().map(|m| m.to_string()).collect(),
             });
         }
         let recs: Vec<&InteractionRecord> = records
             .iter()
             .filter(|r| members.contains(&r.user_id.as_str()))
             .collect();
-        // F^p targets: success rate per observed (L, F, PS).
-        let mut success: BTreeMap<(u8, u8, i8), (f64, f64)> = BTreeMap::new();
-        // F^e targets: mean E per observed (L, F, PS, O).
-        let mut engagement: BTreeMap<(u8, u8, i8, i8), (f64, f64)> = BTreeMap::new();
-        for r in &recs {
-            let s = success
-                .entry((r.level.get(), r.feedback as u8, r.previous_score))
-                .or_default();
-            s.0 += f64::from(u8::from(r.outcome.sign() > 0));
-            s.1 += 1.0;
-            if let Some(e) = r.engagement {
-                let g = engagement
-                    .entry((
-                        r.level.get(),
-                        r.feedback as u8,
-                        r.previous_score,
-                        r.outcome.sign(),
-                    ))
-                    .or_default();
-                g.0 += e;
-                g.1 += 1.0;
-            }
-        }
-        let input = |l: u8, f: u8, ps: i8| -> Result<ModelInput, UserModelError> {
-            let level =
-                Level::new(l.into()).map_err(|e| UserModelError::UserVector(e.to_string()))?;
-            let feedback = sequence_game::Feedback::new(f.into())
-                .map_err(|e| UserModelError::UserVector(e.to_string()))?;
-            ModelInput::new(level, feedback, ps)
-                .map_err(|e| UserModelError::UserVector(e.to_string()))
-        };
-        let mut px = Vec::new();
-        let mut py = Vec::new();
-        for ((l, f, ps), (hits, n)) in &success {
-            px.push(encode(input(*l, *f, *ps)?, None));
-            py.push(hits / n);
-        }
-        let mut ex = Vec::new();
-        let mut ey = Vec::new();
-        for ((l, f, ps, o), (sum, n)) in &engagement {
-            let m = sum / n;
-            if m < 1.0 {
-                let outcome = sequence_game::Outcome::new((*o).into())
-                    .map_err(|e| UserModelError::UserVector(e.to_string()))?;
-                ex.push(encode(input(*l, *f, *ps)?, Some(outcome)));
-                ey.push(m);
-            }
-        }
-        let seed = options.seed.wrapping_add(1000 * k as u64);
+        let ((px, py), (ex, ey)) = training_sets(&recs);
+        let member_vectors: Vec<&[f64; 6]> = users
+            .iter()
+            .filter(|(u, _)| members.contains(&u.as_str()))
+            .map(|(_, v)| v)
+            .collect();
+        // Fig. 3b: means over the cluster's sequences (the authors' per-cluster numbers),
+        // spread across its users.
         let levels = Level::ALL
             .iter()
             .map(|l| {
-                let member_vectors: Vec<&[f64; 6]> = users
+                let at: Vec<&&InteractionRecord> = recs.iter().filter(|r| r.level == *l).collect();
+                let s: Vec<f64> = at
                     .iter()
-                    .filter(|(u, _)| members.contains(&u.as_str()))
-                    .map(|(_, v)| v)
+                    .map(|r| f64::from(u8::from(r.outcome == Outcome::Success)))
                     .collect();
-                let p: Vec<f64> = member_vectors.iter().map(|v| v[2 * l.index()]).collect();
-                let e: Vec<f64> = member_vectors
+                let e: Vec<f64> = at.iter().filter_map(|r| r.engagement).collect();
+                let user_s: Vec<f64> = member_vectors.iter().map(|v| v[2 * l.index()]).collect();
+                let user_e: Vec<f64> = member_vectors
                     .iter()
                     .map(|v| v[2 * l.index() + 1])
                     .collect();
                 LevelStats {
                     level: l.get(),
-                    success_mean: mean(&p),
-                    success_std: std(&p),
+                    sequences: at.len(),
+                    success_mean: mean(&s),
+                    success_std: std(&user_s),
                     engagement_mean: mean(&e),
-                    engagement_std: std(&e),
+                    engagement_std: std(&user_e),
                 }
             })
             .collect();
+        let seed = options.seed.wrapping_add(1000 * k as u64);
+        let optimiser = |seed| {
+            options.optimise.then_some(OptimiserOptions {
+                bounds: options.bounds,
+                restarts: options.optimiser_restarts,
+                seed,
+            })
+        };
+        let gp_err = |component| {
+            move |source| UserModelError::Gp {
+                cluster: k,
+                component,
+                source,
+            }
+        };
         clusters.push(ClusterModel {
             cluster: k,
             users: members.iter().map(|m| m.to_string()).collect(),
             levels,
-            success: component(px, py, options, k, "F^p", seed)?,
-            engagement: component(ex, ey, options, k, "F^e", seed + 1)?,
+            success: GpComponent::fit(px, py, options.kernel, options.noise, optimiser(seed))
+                .map_err(gp_err("F^p"))?,
+            engagement: GpComponent::fit(
+                ex,
+                ey,
+                options.kernel,
+                options.noise,
+                optimiser(seed + 1),
+            )
+            .map_err(gp_err("F^e"))?,
         });
     }
     let file = UserModelFile {
@@ -286,4 +261,47 @@ pub fn fit(
         clusters,
     };
     UserModelSet::from_file(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::{StudySpec, simulate_study};
+    use sequence_game::Feedback;
+
+    #[test]
+    fn targets_are_group_means_and_engagement_groups_at_one_are_dropped() {
+        let mut records = simulate_study(&StudySpec::default());
+        records.truncate(10);
+        for r in records.iter_mut() {
+            r.level = Level::ONE;
+            r.feedback = Feedback::None;
+            r.previous_score = 0;
+        }
+        for (i, r) in records.iter_mut().enumerate() {
+            r.outcome = if i < 4 {
+                Outcome::Success
+            } else {
+                Outcome::Failure
+            };
+            r.score = r.outcome.score(r.level);
+            r.engagement = Some(if i < 4 { 1.0 } else { 0.25 });
+        }
+        let refs: Vec<&InteractionRecord> = records.iter().collect();
+        let ((px, py), (ex, ey)) = training_sets(&refs);
+        assert_eq!(px, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0]]);
+        assert_eq!(py, [0.4]);
+        // The success group has mean engagement 1.0 and is dropped.
+        assert_eq!(ex, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0, -1.0]]);
+        assert_eq!(ey, [0.25]);
+    }
+
+    #[test]
+    fn fitting_is_deterministic_for_a_seed() {
+        let records = simulate_study(&StudySpec::default());
+        let a = fit(&records, &FitOptions::default()).expect("fits");
+        let b = fit(&records, &FitOptions::default()).expect("fits");
+        assert_eq!(a.file(), b.file());
+        assert_eq!(a.tables(), b.tables());
+    }
 }

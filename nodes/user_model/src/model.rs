@@ -4,13 +4,14 @@
 //! every prediction over the finite input space is then tabulated once.
 
 use crate::clustering::{Pca, nearest};
-use crate::gp::{GaussianProcess, GpError, Kernel};
+use crate::gp::{GaussianProcess, GpError, Kernel, OptimiserOptions};
 use sequence_game::{ModelInput, Outcome, Prediction, UserModelTable};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 pub const FORMAT: &str = "qt_therapy user models";
-pub const FORMAT_VERSION: u32 = 1;
+/// 2: per-level stats gained `sequences`; their std is across users (1 had no `sequences`).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Anything that goes wrong fitting, saving or loading user models, naming the culprit.
 #[derive(Debug, thiserror::Error)]
@@ -20,35 +21,47 @@ pub enum UserModelError {
     #[error("{users} users cannot make {clusters} clusters of at least 2 users each")]
     TooFewUsers { clusters: usize, users: usize },
     #[error(
-        "cluster {cluster} has {users} user(s): a user model needs at least 2 (try fewer clusters)"
+        "cluster {cluster} has {} user(s) ({}): a user model needs at least 2 (try fewer clusters)",
+        users.len(),
+        users.join(", ")
     )]
-    ClusterTooSmall { cluster: usize, users: usize },
+    ClusterTooSmall { cluster: usize, users: Vec<String> },
     #[error(
-        "user {user} played no level-{level} sequence{what}: the user vector needs every level"
+        "user {user} has no level-{level} sequence with engagement: the user vector needs every level"
     )]
-    MissingLevel {
-        user: String,
-        level: u8,
-        what: &'static str,
-    },
+    MissingLevel { user: String, level: u8 },
     #[error("cluster {cluster}, {component}: {source}")]
     Gp {
         cluster: usize,
         component: &'static str,
         source: GpError,
     },
+    #[error("fit options: {0}")]
+    Options(String),
     #[error("{path}: {reason}")]
     File { path: PathBuf, reason: String },
+    #[error("{path}, field {field}: {reason}")]
+    Field {
+        path: PathBuf,
+        field: String,
+        reason: String,
+    },
     #[error("{path} is format version {found}; this program reads version {FORMAT_VERSION}")]
-    Version { path: PathBuf, found: u32 },
-    #[error("user vector: {0}")]
-    UserVector(String),
-    #[error("cluster {cluster} does not exist (the model file has {count})")]
+    Version { path: PathBuf, found: u64 },
+    #[error("user vector, value {index} = {value}: must be finite and in [{low}, {high}]")]
+    UserVector {
+        index: usize,
+        value: f64,
+        low: f64,
+        high: f64,
+    },
+    #[error("cluster {cluster} does not exist (the model has {count})")]
     NoSuchCluster { cluster: i64, count: usize },
 }
 
 /// A GP component as stored: inputs before standardisation, targets, kernel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GpComponent {
     pub kernel: Kernel,
     pub noise: f64,
@@ -62,6 +75,63 @@ pub struct GpComponent {
 }
 
 impl GpComponent {
+    /// Fits one GP on raw encoded `inputs`: z-scores them with their population mean and
+    /// variance (+1e-8), as the authors do, then fits `kernel` as given (`optimiser` None) or
+    /// with the hyperparameters that maximise the log marginal likelihood.
+    pub fn fit(
+        inputs: Vec<Vec<f64>>,
+        targets: Vec<f64>,
+        kernel: Kernel,
+        noise: f64,
+        optimiser: Option<OptimiserOptions>,
+    ) -> Result<GpComponent, GpError> {
+        let d = inputs.first().map_or(0, Vec::len);
+        if let Some(index) = inputs.iter().position(|x| x.len() != d) {
+            return Err(GpError::Ragged {
+                index,
+                expected: d,
+                found: inputs[index].len(),
+            });
+        }
+        let n = inputs.len().max(1) as f64;
+        let input_mean: Vec<f64> = (0..d)
+            .map(|j| {
+                inputs
+                    .iter()
+                    .map(|x| x.get(j).copied().unwrap_or(0.0))
+                    .sum::<f64>()
+                    / n
+            })
+            .collect();
+        let input_scale: Vec<f64> = (0..d)
+            .map(|j| {
+                let var = inputs
+                    .iter()
+                    .map(|x| (x.get(j).copied().unwrap_or(0.0) - input_mean[j]).powi(2))
+                    .sum::<f64>()
+                    / n;
+                (var + 1e-8).sqrt()
+            })
+            .collect();
+        let mut c = GpComponent {
+            kernel,
+            noise,
+            input_mean,
+            input_scale,
+            inputs,
+            targets,
+            log_marginal_likelihood: 0.0,
+        };
+        let x: Vec<Vec<f64>> = c.inputs.iter().map(|x| c.standardise(x)).collect();
+        let gp = match optimiser {
+            Some(o) => GaussianProcess::fit_optimised(x, &c.targets, kernel, noise, &o),
+            None => GaussianProcess::fit(x, &c.targets, kernel, noise),
+        }?;
+        c.kernel = gp.kernel();
+        c.log_marginal_likelihood = gp.log_marginal_likelihood();
+        Ok(c)
+    }
+
     pub fn standardise(&self, x: &[f64]) -> Vec<f64> {
         x.iter()
             .zip(&self.input_mean)
@@ -80,10 +150,14 @@ impl GpComponent {
     }
 }
 
-/// Per level, across a cluster's users: mean and std of P(success|L) and of E|L (Fig. 3).
+/// Per level, one cluster's numbers for Fig. 3b: the means over the cluster's sequences of that
+/// level (the authors' per-cluster numbers), the standard deviations across the cluster's users
+/// (of each user's own success rate and mean E at that level).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LevelStats {
     pub level: u8,
+    pub sequences: usize,
     pub success_mean: f64,
     pub success_std: f64,
     pub engagement_mean: f64,
@@ -92,6 +166,7 @@ pub struct LevelStats {
 
 /// One cluster's users and model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ClusterModel {
     pub cluster: usize,
     pub users: Vec<String>,
@@ -102,6 +177,7 @@ pub struct ClusterModel {
 
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct UserModelFile {
     pub format: String,
     pub version: u32,
@@ -115,6 +191,7 @@ pub struct UserModelFile {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct UserPoint {
     pub user: String,
     pub cluster: usize,
@@ -122,7 +199,7 @@ pub struct UserPoint {
     pub projection: Vec<f64>,
 }
 
-/// The encoded GP input of (L, F, PS) (and O for engagement).
+/// The encoded GP input [L/3, one-hot F, PS/3] of (L, F, PS), with O (±1) appended for F^e.
 pub fn encode(input: ModelInput, outcome: Option<Outcome>) -> Vec<f64> {
     let mut x = vec![
         f64::from(input.level.get()) / 3.0,
@@ -138,15 +215,147 @@ pub fn encode(input: ModelInput, outcome: Option<Outcome>) -> Vec<f64> {
     x
 }
 
-/// Loaded user models, ready to answer.
+/// Width of the encoded F^p input; F^e adds the outcome.
+pub const SUCCESS_INPUT_WIDTH: usize = 5;
+
+/// Loaded user models, ready to answer: every prediction already tabulated.
 #[derive(Debug, Clone)]
 pub struct UserModelSet {
     file: UserModelFile,
     tables: Vec<UserModelTable>,
 }
 
+/// Where a loaded file does not make sense: (field path, reason).
+type Problem = (String, String);
+
+fn finite_all(field: String, values: &[f64]) -> Result<(), Problem> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err((
+            format!("{field}[{i}]"),
+            format!("{} is not finite", values[i]),
+        )),
+        None => Ok(()),
+    }
+}
+
+fn length(field: String, found: usize, expected: usize) -> Result<(), Problem> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err((field, format!("has {found} values, expected {expected}")))
+    }
+}
+
+impl GpComponent {
+    /// Checks the stored shape and values; `width` is the encoded input width.
+    fn check(&self, field: &str, width: usize, range: (f64, f64)) -> Result<(), Problem> {
+        self.kernel
+            .validate()
+            .map_err(|e| (format!("{field}.kernel"), e.to_string()))?;
+        if !(self.noise.is_finite() && self.noise >= 0.0) {
+            return Err((
+                format!("{field}.noise"),
+                format!("{} must be >= 0", self.noise),
+            ));
+        }
+        length(format!("{field}.input_mean"), self.input_mean.len(), width)?;
+        length(
+            format!("{field}.input_scale"),
+            self.input_scale.len(),
+            width,
+        )?;
+        finite_all(format!("{field}.input_mean"), &self.input_mean)?;
+        if let Some(i) = self
+            .input_scale
+            .iter()
+            .position(|v| !(v.is_finite() && *v > 0.0))
+        {
+            return Err((
+                format!("{field}.input_scale[{i}]"),
+                format!("{} must be > 0", self.input_scale[i]),
+            ));
+        }
+        if self.inputs.is_empty() {
+            return Err((format!("{field}.inputs"), "is empty".into()));
+        }
+        length(
+            format!("{field}.targets"),
+            self.targets.len(),
+            self.inputs.len(),
+        )?;
+        for (i, x) in self.inputs.iter().enumerate() {
+            length(format!("{field}.inputs[{i}]"), x.len(), width)?;
+            finite_all(format!("{field}.inputs[{i}]"), x)?;
+        }
+        if let Some(i) = self
+            .targets
+            .iter()
+            .position(|t| !(t.is_finite() && *t >= range.0 && *t <= range.1))
+        {
+            return Err((
+                format!("{field}.targets[{i}]"),
+                format!("{} is outside [{}, {}]", self.targets[i], range.0, range.1),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl UserModelFile {
+    /// Checks everything the types do not: lengths, finiteness, cluster numbering.
+    fn check(&self) -> Result<(), Problem> {
+        let dims = 2 * sequence_game::LEVEL_COUNT;
+        length("pca.mean".into(), self.pca.mean.len(), dims)?;
+        finite_all("pca.mean".into(), &self.pca.mean)?;
+        length("pca.components".into(), self.pca.components.len(), 2)?;
+        for (i, c) in self.pca.components.iter().enumerate() {
+            length(format!("pca.components[{i}]"), c.len(), dims)?;
+            finite_all(format!("pca.components[{i}]"), c)?;
+        }
+        if self.clusters.is_empty() {
+            return Err(("clusters".into(), "is empty".into()));
+        }
+        length("centres".into(), self.centres.len(), self.clusters.len())?;
+        for (i, c) in self.centres.iter().enumerate() {
+            length(format!("centres[{i}]"), c.len(), 2)?;
+            finite_all(format!("centres[{i}]"), c)?;
+        }
+        for (i, c) in self.clusters.iter().enumerate() {
+            if c.cluster != i {
+                return Err((
+                    format!("clusters[{i}].cluster"),
+                    format!(
+                        "is {}, expected {i} (clusters are numbered in order)",
+                        c.cluster
+                    ),
+                ));
+            }
+            c.success.check(
+                &format!("clusters[{i}].success"),
+                SUCCESS_INPUT_WIDTH,
+                (0.0, 1.0),
+            )?;
+            c.engagement.check(
+                &format!("clusters[{i}].engagement"),
+                SUCCESS_INPUT_WIDTH + 1,
+                (-1.0, 1.0),
+            )?;
+        }
+        for (i, u) in self.users.iter().enumerate() {
+            if u.cluster >= self.clusters.len() {
+                return Err((
+                    format!("users[{i}].cluster"),
+                    format!("{} does not exist", u.cluster),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl UserModelSet {
-    /// Builds the GPs of `file` and tabulates every prediction.
+    /// Builds the GPs of `file` and tabulates every prediction (clamped to [0, 1] and
+    /// [-1, 1]).
     pub fn from_file(file: UserModelFile) -> Result<UserModelSet, UserModelError> {
         let mut tables = Vec::new();
         for c in &file.clusters {
@@ -159,74 +368,90 @@ impl UserModelSet {
             };
             let success = c.success.build().map_err(gp_err("F^p"))?;
             let engagement = c.engagement.build().map_err(gp_err("F^e"))?;
-            let mut failure = None;
-            let table = UserModelTable::tabulate(
-                c.cluster,
-                |i| match success.predict(&c.success.standardise(&encode(i, None))) {
-                    Ok((m, s)) => Prediction {
-                        mean: m.clamp(0.0, 1.0),
-                        std: s,
-                    },
-                    Err(e) => {
-                        failure = Some(e);
-                        Prediction {
-                            mean: 0.0,
-                            std: 0.0,
-                        }
-                    }
-                },
-                |i, o| match engagement.predict(&c.engagement.standardise(&encode(i, Some(o)))) {
-                    Ok((m, s)) => Prediction {
-                        mean: m.clamp(-1.0, 1.0),
-                        std: s,
-                    },
-                    Err(_) => Prediction {
-                        mean: 0.0,
-                        std: 0.0,
-                    },
-                },
-            );
-            if let Some(e) = failure {
-                return Err(UserModelError::Gp {
+            let mut failure: Option<UserModelError> = None;
+            let mut note = |component: &'static str, e: GpError| {
+                failure.get_or_insert(UserModelError::Gp {
                     cluster: c.cluster,
-                    component: "F^p",
+                    component,
                     source: e,
                 });
+                Prediction {
+                    mean: 0.0,
+                    std: 0.0,
+                }
+            };
+            let mut predictions = Vec::new();
+            for input in ModelInput::all() {
+                predictions.push(
+                    match success.predict(&c.success.standardise(&encode(input, None))) {
+                        Ok((m, s)) => Prediction {
+                            mean: m.clamp(0.0, 1.0),
+                            std: s,
+                        },
+                        Err(e) => note("F^p", e),
+                    },
+                );
             }
-            tables.push(table);
+            let mut engagement_predictions = Vec::new();
+            for input in ModelInput::all() {
+                for o in Outcome::ALL {
+                    let x = c.engagement.standardise(&encode(input, Some(o)));
+                    engagement_predictions.push(match engagement.predict(&x) {
+                        Ok((m, s)) => Prediction {
+                            mean: m.clamp(-1.0, 1.0),
+                            std: s,
+                        },
+                        Err(e) => note("F^e", e),
+                    });
+                }
+            }
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            // Built in table order: ModelInput::all(), then Outcome::ALL within each input.
+            tables.push(UserModelTable {
+                cluster: c.cluster,
+                success: predictions,
+                engagement: engagement_predictions,
+            });
         }
         Ok(UserModelSet { file, tables })
     }
 
-    /// Reads and checks a model file.
+    /// Reads and checks a model file, naming the field at fault.
     pub fn load(path: &Path) -> Result<UserModelSet, UserModelError> {
         let bad = |reason: String| UserModelError::File {
             path: path.into(),
             reason,
         };
+        let field = |(field, reason): Problem| UserModelError::Field {
+            path: path.into(),
+            field,
+            reason,
+        };
         let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-        let value: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| bad(format!("not JSON (truncated?): {e}")))?;
+        let value: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| bad(format!("not valid JSON (truncated?): {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
-            return Err(bad(format!(
-                "not a user-model file (its \"format\" is not {FORMAT:?})"
+            return Err(field((
+                "format".into(),
+                format!("is not {FORMAT:?}: not a user-model file"),
             )));
         }
-        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0) as u32;
-        if version != FORMAT_VERSION {
-            return Err(UserModelError::Version {
-                path: path.into(),
-                found: version,
-            });
+        let version = value.get("version").and_then(serde_json::Value::as_u64);
+        match version {
+            Some(v) if v == u64::from(FORMAT_VERSION) => {}
+            Some(found) => {
+                return Err(UserModelError::Version {
+                    path: path.into(),
+                    found,
+                });
+            }
+            None => return Err(field(("version".into(), "is missing".into()))),
         }
-        let file: UserModelFile = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
-        if file.clusters.is_empty() || file.centres.len() != file.clusters.len() {
-            return Err(bad(format!(
-                "{} clusters but {} centres",
-                file.clusters.len(),
-                file.centres.len()
-            )));
-        }
+        let file: UserModelFile = serde_path_to_error::deserialize(value)
+            .map_err(|e| field((e.path().to_string(), e.inner().to_string())))?;
+        file.check().map_err(field)?;
         let set = UserModelSet::from_file(file)?;
         for t in &set.tables {
             t.validate().map_err(|e| bad(e.to_string()))?;
@@ -246,8 +471,12 @@ impl UserModelSet {
             .filter(|d| !d.as_os_str().is_empty())
             .unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir).map_err(|e| bad(e.to_string()))?;
-        let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| bad(e.to_string()))?;
-        std::fs::write(tmp.path(), text + "\n").map_err(|e| bad(e.to_string()))?;
+        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| bad(e.to_string()))?;
+        use std::io::Write;
+        tmp.write_all(text.as_bytes())
+            .and_then(|()| tmp.write_all(b"\n"))
+            .and_then(|()| tmp.as_file().sync_all())
+            .map_err(|e| bad(e.to_string()))?;
         // The temporary file is private; the model is meant to be read by every node.
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))
@@ -264,11 +493,12 @@ impl UserModelSet {
         self.tables.len()
     }
 
-    /// Every prediction of every cluster, precomputed.
+    /// Every prediction of every cluster, precomputed: a query is a table lookup.
     pub fn tables(&self) -> Vec<UserModelTable> {
         self.tables.clone()
     }
 
+    /// The table of one cluster.
     pub fn table(&self, cluster: i64) -> Result<&UserModelTable, UserModelError> {
         usize::try_from(cluster)
             .ok()
@@ -279,14 +509,22 @@ impl UserModelSet {
             })
     }
 
-    /// The cluster of a new user from their vector (P(s|L1), E1, P(s|L2), E2, P(s|L3), E3).
+    /// The cluster of a new user from their vector (P(s|L1), E1, P(s|L2), E2, P(s|L3), E3):
+    /// PCA-projected, then the nearest cluster centre.
     pub fn assign_cluster(&self, user_vector: &[f64; 6]) -> Result<usize, UserModelError> {
-        for (i, v) in user_vector.iter().enumerate() {
-            let (lo, hi) = if i % 2 == 0 { (0.0, 1.0) } else { (-1.0, 1.0) };
-            if !(v.is_finite() && *v >= lo && *v <= hi) {
-                return Err(UserModelError::UserVector(format!(
-                    "value {i} = {v} is outside [{lo}, {hi}]"
-                )));
+        for (index, value) in user_vector.iter().enumerate() {
+            let (low, high) = if index % 2 == 0 {
+                (0.0, 1.0)
+            } else {
+                (-1.0, 1.0)
+            };
+            if !(value.is_finite() && *value >= low && *value <= high) {
+                return Err(UserModelError::UserVector {
+                    index,
+                    value: *value,
+                    low,
+                    high,
+                });
             }
         }
         Ok(nearest(

@@ -12,12 +12,17 @@ const COLOURS: [RGBColor; 4] = [
     RGBColor(148, 103, 189),
 ];
 
-fn err<E: std::fmt::Debug>(e: E) -> String {
-    format!("{e:?}")
+/// A figure that could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+#[error("figure: {0}")]
+pub struct PlotError(String);
+
+fn err<E: std::fmt::Debug>(e: E) -> PlotError {
+    PlotError(format!("{e:?}"))
 }
 
 /// Fig. 3a as SVG.
-pub fn clusters_svg(file: &UserModelFile) -> Result<String, String> {
+pub fn clusters_svg(file: &UserModelFile) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (560, 460)).into_drawing_area();
@@ -34,7 +39,7 @@ pub fn clusters_svg(file: &UserModelFile) -> Result<String, String> {
             (lo - pad)..(hi + pad)
         };
         let mut chart = ChartBuilder::on(&root)
-            .caption("Users in PCA space (Fig. 3a)", ("sans-serif", 20))
+            .caption("User clusters in PCA space (Fig. 3a)", ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(50)
@@ -42,8 +47,8 @@ pub fn clusters_svg(file: &UserModelFile) -> Result<String, String> {
             .map_err(err)?;
         chart
             .configure_mesh()
-            .x_desc("first principal component")
-            .y_desc("second principal component")
+            .x_desc("first principal component (FPC)")
+            .y_desc("second principal component (SPC)")
             .draw()
             .map_err(err)?;
         for c in &file.clusters {
@@ -72,6 +77,7 @@ pub fn clusters_svg(file: &UserModelFile) -> Result<String, String> {
         }
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .draw()
@@ -82,7 +88,7 @@ pub fn clusters_svg(file: &UserModelFile) -> Result<String, String> {
 }
 
 /// Fig. 3b as SVG: two panels, P(success|L) and E|L, a bar per cluster with ±1 std.
-pub fn levels_svg(file: &UserModelFile) -> Result<String, String> {
+pub fn levels_svg(file: &UserModelFile) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (900, 400)).into_drawing_area();
@@ -90,20 +96,21 @@ pub fn levels_svg(file: &UserModelFile) -> Result<String, String> {
         let panels = root.split_evenly((1, 2));
         let k = file.clusters.len().max(1) as f64;
         for (panel, (title, range, pick)) in panels.iter().zip([
-            ("P(success | L)", 0.0..1.1, 0usize),
-            ("engagement E | L", -1.1..1.1, 1usize),
+            ("P(success | L)", 0.0..1.45, 0usize),
+            ("engagement E | L", -1.1..1.6, 1usize),
         ]) {
             let mut chart = ChartBuilder::on(panel)
                 .caption(title, ("sans-serif", 18))
                 .margin(12)
                 .x_label_area_size(35)
-                .y_label_area_size(45)
+                .y_label_area_size(60)
                 .build_cartesian_2d(0.5..3.5, range)
                 .map_err(err)?;
             chart
                 .configure_mesh()
                 .x_labels(3)
                 .x_label_formatter(&|x| format!("L{:.0}", x))
+                .y_desc("mean over sequences, ±1 std across users")
                 .disable_x_mesh()
                 .draw()
                 .map_err(err)?;
@@ -131,18 +138,28 @@ pub fn levels_svg(file: &UserModelFile) -> Result<String, String> {
                         )
                     }))
                     .map_err(err)?
-                    .label(format!("cluster {}", c.cluster))
+                    .label(format!("cluster {} ({} users)", c.cluster, c.users.len()))
                     .legend(move |(x, y)| {
                         Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled())
                     });
                 chart
                     .draw_series(values.iter().map(|(x, m, s)| {
-                        ErrorBar::new_vertical(*x, m - s, *m, m + s, BLACK.stroke_width(2), 8)
+                        // The whiskers stop at the quantity's own range.
+                        let (low, high) = if pick == 0 { (0.0, 1.0) } else { (-1.0, 1.0) };
+                        ErrorBar::new_vertical(
+                            *x,
+                            (m - s).max(low),
+                            *m,
+                            (m + s).min(high),
+                            BLACK.stroke_width(2),
+                            8,
+                        )
                     }))
                     .map_err(err)?;
             }
             chart
                 .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .draw()
@@ -154,14 +171,17 @@ pub fn levels_svg(file: &UserModelFile) -> Result<String, String> {
 }
 
 /// Writes `<dir>/clusters.{svg,png}` and `<dir>/levels.{svg,png}`.
-pub fn write_figures(file: &UserModelFile, dir: &Path) -> Result<Vec<std::path::PathBuf>, String> {
+pub fn write_figures(
+    file: &UserModelFile,
+    dir: &Path,
+) -> Result<Vec<std::path::PathBuf>, PlotError> {
     let mut written = Vec::new();
     for (name, svg) in [
         ("clusters", clusters_svg(file)?),
         ("levels", levels_svg(file)?),
     ] {
-        let (s, p) =
-            figures::write_svg_and_png(&dir.join(name), &svg).map_err(|e| e.to_string())?;
+        let (s, p) = figures::write_svg_and_png(&dir.join(name), &svg)
+            .map_err(|e| PlotError(e.to_string()))?;
         written.push(s);
         written.push(p);
     }

@@ -1,0 +1,160 @@
+//! `user_model fit`: reads interaction data (the study directory or our CSV), fits the user
+//! models, writes the model file and the Fig. 3 plots, and prints the per-cluster numbers.
+
+use anyhow::{Context, bail};
+use std::io::Write;
+use std::path::PathBuf;
+use user_model::{FitOptions, Kernel};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The study directory (sequences.csv + engagement_per_second.csv) or a CSV of records in
+    /// our format.
+    #[arg(long)]
+    data: PathBuf,
+    /// Number of clusters c.
+    #[arg(long, default_value_t = 2)]
+    clusters: usize,
+    /// Seed of K-means and of the hyperparameter restarts.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// rational-quadratic (the authors'), rbf, matern12, matern32 or matern52.
+    #[arg(long, default_value = "rational-quadratic")]
+    kernel: String,
+    /// Length scale: initial value, or the fixed one with --fixed.
+    #[arg(long, default_value_t = 1.0)]
+    length_scale: f64,
+    /// RationalQuadratic α: initial value, or the fixed one with --fixed.
+    #[arg(long, default_value_t = 1.5)]
+    alpha: f64,
+    /// Keep the given hyperparameters instead of maximising the log marginal likelihood.
+    #[arg(long)]
+    fixed: bool,
+    /// Seeded random starts of the hyperparameter search besides the initial values (0: the
+    /// authors' setting).
+    #[arg(long, default_value_t = 0)]
+    restarts: usize,
+    /// K-means runs from different k-means++ seedings.
+    #[arg(long, default_value_t = 10)]
+    kmeans_restarts: usize,
+    /// The model file to write.
+    #[arg(long)]
+    output: PathBuf,
+    /// Directory for clusters.{svg,png} and levels.{svg,png} [default: beside the output].
+    #[arg(long)]
+    figures: Option<PathBuf>,
+}
+
+fn kernel(a: &Args) -> anyhow::Result<Kernel> {
+    let l = a.length_scale;
+    let k = match a.kernel.as_str() {
+        "rational-quadratic" => Kernel::RationalQuadratic {
+            length_scale: l,
+            alpha: a.alpha,
+        },
+        "rbf" => Kernel::Rbf { length_scale: l },
+        "matern12" => Kernel::Matern {
+            length_scale: l,
+            nu: 0.5,
+        },
+        "matern32" => Kernel::Matern {
+            length_scale: l,
+            nu: 1.5,
+        },
+        "matern52" => Kernel::Matern {
+            length_scale: l,
+            nu: 2.5,
+        },
+        other => bail!(
+            "--kernel {other:?} is not rational-quadratic, rbf, matern12, matern32 or matern52"
+        ),
+    };
+    k.validate().context("--length-scale / --alpha")?;
+    Ok(k)
+}
+
+pub fn main(a: Args) -> anyhow::Result<()> {
+    let records = user_model::data::read_any(&a.data)
+        .with_context(|| format!("reading {}", a.data.display()))?;
+    let mut provenance = format!(
+        "user_model fit --data {} --clusters {} --seed {} --kernel {} --length-scale {} --alpha {} --restarts {} --kmeans-restarts {}",
+        a.data.display(),
+        a.clusters,
+        a.seed,
+        a.kernel,
+        a.length_scale,
+        a.alpha,
+        a.restarts,
+        a.kmeans_restarts
+    );
+    if a.fixed {
+        provenance.push_str(" --fixed");
+    }
+    let options = FitOptions {
+        clusters: a.clusters,
+        seed: a.seed,
+        kmeans_restarts: a.kmeans_restarts,
+        kernel: kernel(&a)?,
+        optimise: !a.fixed,
+        optimiser_restarts: a.restarts,
+        provenance,
+        ..FitOptions::default()
+    };
+    let started = std::time::Instant::now();
+    let set = user_model::fit(&records, &options)
+        .with_context(|| format!("fitting {}", a.data.display()))?;
+    let took = started.elapsed();
+    set.save(&a.output)?;
+    let figures = a
+        .figures
+        .clone()
+        .unwrap_or_else(|| a.output.parent().map(PathBuf::from).unwrap_or_default());
+    let written = user_model::plot::write_figures(set.file(), &figures)
+        .with_context(|| format!("writing figures to {}", figures.display()))?;
+    // Written with errors returned (a closed pipe is not a panic).
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "{} records of {} users -> {} clusters in {:.1} ms",
+        records.len(),
+        set.file().users.len(),
+        set.cluster_count(),
+        took.as_secs_f64() * 1e3
+    )?;
+    writeln!(
+        out,
+        "cluster  users  P(s|L1)  P(s|L2)  P(s|L3)    E|L1    E|L2    E|L3"
+    )?;
+    for c in &set.file().clusters {
+        let l = &c.levels;
+        writeln!(
+            out,
+            "{:>7}  {:>5}  {:>7.3}  {:>7.3}  {:>7.3}  {:>+6.3}  {:>+6.3}  {:>+6.3}",
+            c.cluster,
+            c.users.len(),
+            l[0].success_mean,
+            l[1].success_mean,
+            l[2].success_mean,
+            l[0].engagement_mean,
+            l[1].engagement_mean,
+            l[2].engagement_mean,
+        )?;
+    }
+    for c in &set.file().clusters {
+        for (name, g) in [("F^p", &c.success), ("F^e", &c.engagement)] {
+            writeln!(
+                out,
+                "cluster {} {name}: {} points, {:?}, log marginal likelihood {:.4}",
+                c.cluster,
+                g.targets.len(),
+                g.kernel,
+                g.log_marginal_likelihood
+            )?;
+        }
+    }
+    writeln!(out, "model: {}", a.output.display())?;
+    for w in written {
+        writeln!(out, "figure: {}", w.display())?;
+    }
+    Ok(())
+}
