@@ -225,12 +225,11 @@ impl Scan {
             inner_at.inner = Some((index, records[pos]));
             let (opcode, body) = frame(&records[pos..])
                 .map_err(|(needed, left)| truncated(bag, inner_at.clone(), needed, left))?;
-            match parse(opcode, body).map_err(|e| malformed(bag, inner_at.clone(), e))? {
-                // The spec allows only these three in a chunk; others are skipped.
-                r @ (Rec::Schema { .. } | Rec::Channel { .. } | Rec::Message { .. }) => {
-                    self.content(r, inner_at, bag)?
-                }
-                _ => {}
+            // The spec allows only these three in a chunk; others are skipped.
+            if let r @ (Rec::Schema { .. } | Rec::Channel { .. } | Rec::Message { .. }) =
+                parse(opcode, body).map_err(|e| malformed(bag, inner_at.clone(), e))?
+            {
+                self.content(r, inner_at, bag)?;
             }
             pos += 9 + body.len();
             index += 1;
