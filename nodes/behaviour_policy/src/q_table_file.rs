@@ -120,7 +120,7 @@ mod tests {
         assert_eq!(QTableFile::load(&path).expect("loads"), f);
         let good = std::fs::read_to_string(&path).expect("read");
         std::fs::write(&path, &good[..good.len() / 2]).expect("truncate");
-        let e = QTableFile::load(&path).err().expect("truncated");
+        let e = QTableFile::load(&path).expect_err("truncated");
         assert!(e.to_string().contains("cluster_0.json"), "{e}");
         std::fs::write(&path, good.replace("\"version\":1", "\"version\":7")).expect("write");
         assert!(matches!(
