@@ -1,18 +1,11 @@
-//! Tabular Q-learning as the paper's Algorithm 1, with the authors' details (REFERENCE.md): the
-//! state (L, F, PS) lags the result by one step, only a1..a3 in the start state, softmax with a
-//! per-state temperature T_s = max(T_min, T0 - decay * visits_s) (visits from 1, counted in one
-//! session per epoch), success drawn as U(0,1) <= F^p, E from F^e at (next state, O), rewards
-//! RE / RE + βE / λE, no bootstrap on the last step of a session.
+//! Q-learning pieces of the paper's Algorithm 1 shared by the simulator and the live policy:
+//! reward functions F_r, the per-state temperature schedule, the Q-table, the softmax and
+//! greedy choices, and the update rule. One implementation, so simulation and node agree.
 
-use rand::RngExt;
-use rand_chacha::ChaCha8Rng;
-use sequence_game::{
-    ACTION_COUNT, Action, ModelInput, Outcome, SEQUENCES_PER_SESSION, STATE_COUNT, State,
-    UserModelTable,
-};
+use sequence_game::{ACTION_COUNT, LEVEL_COUNT, STATE_COUNT, State};
 use serde::{Deserialize, Serialize};
 
-/// The reward function F_r.
+/// The reward function F_r of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Reward {
     /// RE: L on success, -1 on failure.
@@ -26,6 +19,7 @@ pub enum Reward {
 impl Reward {
     pub const ALL: [Reward; 3] = [Reward::Re, Reward::RePlusBetaE, Reward::LambdaE];
 
+    /// Short ASCII name used in files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Reward::Re => "RE",
@@ -44,21 +38,55 @@ impl Reward {
     }
 }
 
-/// Learning constants (defaults: the authors').
+impl std::fmt::Display for Reward {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// T_s = max(minimum, initial - decay * visits_s): the softmax cools per state as it is visited.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TemperatureSchedule {
+    pub initial: f64,
+    pub minimum: f64,
+    pub decay_per_visit: f64,
+}
+
+impl Default for TemperatureSchedule {
+    /// The authors': 300, 0.5, 5 (fully cooled after 60 counted visits).
+    fn default() -> Self {
+        TemperatureSchedule {
+            initial: 300.0,
+            minimum: 0.5,
+            decay_per_visit: 5.0,
+        }
+    }
+}
+
+impl TemperatureSchedule {
+    pub fn at(&self, visits: u32) -> f64 {
+        (self.initial - self.decay_per_visit * f64::from(visits)).max(self.minimum)
+    }
+}
+
+/// How actions are picked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Mode {
+    /// Softmax with the state's temperature (training in simulation).
+    Explore,
+    /// Greedy, ties broken at random, still learning (real sessions, transfer).
+    Exploit,
+}
+
+/// Learning constants (defaults: the authors', `../shared/REFERENCE.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Learning {
     pub alpha: f64,
     pub gamma: f64,
-    pub initial_temperature: f64,
-    pub min_temperature: f64,
-    pub temperature_decay: f64,
+    pub temperature: TemperatureSchedule,
     pub beta: f64,
     pub lambda: f64,
     pub reward: Reward,
-    /// The authors' state: PS is the score of the sequence *before* the one just played (the
-    /// agent acts before it sees the latest result). False: PS is the latest result, as the
-    /// live game reports it.
-    pub state_lags_result: bool,
 }
 
 impl Default for Learning {
@@ -66,18 +94,16 @@ impl Default for Learning {
         Learning {
             alpha: 0.05,
             gamma: 0.95,
-            initial_temperature: 300.0,
-            min_temperature: 0.5,
-            temperature_decay: 5.0,
+            temperature: TemperatureSchedule::default(),
             beta: 3.0,
             lambda: 3.0,
             reward: Reward::Re,
-            state_lags_result: true,
         }
     }
 }
 
 impl Learning {
+    /// F_r(RE, E).
     pub fn reward(&self, activity_result: f64, engagement: f64) -> f64 {
         match self.reward {
             Reward::Re => activity_result,
@@ -87,276 +113,209 @@ impl Learning {
     }
 }
 
-/// Q-values and visit counts of every state.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Q-values and temperature visit counts of every state, rows in [`State::index`] order.
+#[derive(Debug, Clone, PartialEq)]
 pub struct QTable {
-    pub q: Vec<[f64; ACTION_COUNT]>,
-    /// Visits counted for the temperature (the authors start at 1).
-    pub visits: Vec<u32>,
+    pub q: [[f64; ACTION_COUNT]; STATE_COUNT],
+    /// Visits counted for the temperature; the authors start every state at 1.
+    pub visits: [u32; STATE_COUNT],
 }
 
 impl Default for QTable {
     fn default() -> Self {
         QTable {
-            q: vec![[0.0; ACTION_COUNT]; STATE_COUNT],
-            visits: vec![1; STATE_COUNT],
+            q: [[0.0; ACTION_COUNT]; STATE_COUNT],
+            visits: [1; STATE_COUNT],
         }
     }
-}
-
-/// How an action is picked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Mode {
-    /// Softmax with the state's temperature (training).
-    Explore,
-    /// Greedy, ties broken at random, still learning (real sessions, transfer).
-    Exploit,
-}
-
-/// One choice with what it was based on.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Choice {
-    pub action: Action,
-    pub q_values: [f64; ACTION_COUNT],
-    /// Softmax (or greedy) probabilities; 0 for masked actions.
-    pub probabilities: [f64; ACTION_COUNT],
-    pub temperature: f64,
-    /// A non-greedy action was drawn.
-    pub explored: bool,
 }
 
 impl QTable {
-    pub fn temperature(&self, state: State, learning: &Learning) -> f64 {
-        let visits = f64::from(self.visits[state.index()]);
-        (learning.initial_temperature - learning.temperature_decay * visits)
-            .max(learning.min_temperature)
+    pub fn row(&self, state: State) -> &[f64; ACTION_COUNT] {
+        &self.q[state.index()]
     }
 
-    /// Picks an action in `state` (feedback actions masked at the start).
-    pub fn choose(
-        &self,
-        state: State,
-        mode: Mode,
-        learning: &Learning,
-        rng: &mut ChaCha8Rng,
-    ) -> Choice {
-        let allowed = state.allowed_actions();
-        let q = self.q[state.index()];
-        let temperature = self.temperature(state, learning);
-        let best = allowed
-            .iter()
-            .map(|a| q[a.index()])
-            .fold(f64::NEG_INFINITY, f64::max);
-        let mut probabilities = [0.0; ACTION_COUNT];
-        match mode {
-            Mode::Explore => {
-                // Subtracting the max gives the same probabilities without overflow.
-                let mut total = 0.0;
-                for a in allowed {
-                    let w = ((q[a.index()] - best) / temperature).exp();
-                    probabilities[a.index()] = w;
-                    total += w;
-                }
-                probabilities.iter_mut().for_each(|p| *p /= total);
-            }
-            Mode::Exploit => {
-                let ties = allowed.iter().filter(|a| q[a.index()] == best).count() as f64;
-                for a in allowed.iter().filter(|a| q[a.index()] == best) {
-                    probabilities[a.index()] = 1.0 / ties;
-                }
-            }
-        }
-        let mut u: f64 = rng.random::<f64>();
-        let mut action = allowed[allowed.len() - 1];
-        for a in allowed {
-            let p = probabilities[a.index()];
-            if p > 0.0 && u < p {
-                action = *a;
-                break;
-            }
-            u -= p;
-        }
-        Choice {
-            action,
-            q_values: q,
-            probabilities,
-            temperature,
-            explored: q[action.index()] < best,
-        }
-    }
-
-    /// Q(s,a) += α (r + γ max_a' Q(s',a') - Q(s,a)); without the bootstrap on a session's last step.
-    pub fn update(
-        &mut self,
-        state: State,
-        action: Action,
-        reward: f64,
-        next: State,
-        last_step: bool,
-        learning: &Learning,
-    ) {
-        let bootstrap = if last_step {
-            0.0
-        } else {
-            let nq = &self.q[next.index()];
-            next.allowed_actions()
-                .iter()
-                .map(|a| nq[a.index()])
-                .fold(f64::NEG_INFINITY, f64::max)
-        };
-        let q = &mut self.q[state.index()][action.index()];
-        *q += learning.alpha * (reward + learning.gamma * bootstrap - *q);
+    /// max_a Q(s, a) over the first `allowed` actions (3 in the start state, else 5).
+    pub fn best_value(&self, state: State) -> f64 {
+        best(&self.q[state.index()], allowed_count(state))
     }
 }
 
-/// What one simulated session gave (the authors' per-session metrics).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SessionMetrics {
-    /// Σ L·O
-    pub score: f64,
-    /// Σ L
-    pub max_score: f64,
-    /// Mean of the 10 E values.
-    pub engagement: f64,
-    /// Σ γ^(t-1) r
-    pub discounted_return: f64,
-    /// max_a Q(start, a) after the session.
-    pub start_value: f64,
+/// Number of allowed actions: a1..a3 in the start state, a1..a5 elsewhere. The allowed
+/// actions are always a prefix of a1..a5, so a count says which they are.
+pub fn allowed_count(state: State) -> usize {
+    if state.is_start() {
+        LEVEL_COUNT
+    } else {
+        ACTION_COUNT
+    }
 }
 
-/// One session of Algorithm 1 against a user model; `count_visits` adds this session's state
-/// visits to the temperature counts.
-pub fn simulate_session(
-    table: &mut QTable,
-    model: &UserModelTable,
-    learning: &Learning,
-    mode: Mode,
-    count_visits: bool,
-    rng: &mut ChaCha8Rng,
-) -> SessionMetrics {
-    let mut state = State::START;
-    let mut score_before: i8 = 0;
-    let mut m = SessionMetrics::default();
-    let mut discount = 1.0;
-    for step in 0..SEQUENCES_PER_SESSION {
-        let choice = table.choose(state, mode, learning, rng);
-        if count_visits {
-            table.visits[state.index()] += 1;
-        }
-        let Some((level, feedback)) = choice.action.apply(state) else {
-            break;
-        };
-        // The user model sees the score of the sequence before this one.
-        let input = ModelInput {
-            level,
-            feedback,
-            previous_score: score_before,
-        };
-        let outcome = Outcome::from_correct(rng.random::<f64>() <= model.success(input).mean);
-        let engagement = model.engagement(input, outcome).mean;
-        let activity = outcome.activity_result(level);
-        let reward = learning.reward(activity, engagement);
-        let score = outcome.score(level);
-        // With the authors' lag the new state carries that earlier score too: the agent has
-        // not yet seen the result of the sequence it set up.
-        let shown = if learning.state_lags_result {
-            score_before
-        } else {
-            score
-        };
-        let next = State {
-            level: level.get(),
-            feedback,
-            previous_score: shown,
-        };
-        table.update(
-            state,
-            choice.action,
-            reward,
-            next,
-            step + 1 == SEQUENCES_PER_SESSION,
-            learning,
-        );
-        score_before = score;
-        m.score += f64::from(score_before);
-        m.max_score += f64::from(level.get());
-        m.engagement += engagement / SEQUENCES_PER_SESSION as f64;
-        m.discounted_return += discount * reward;
-        discount *= learning.gamma;
-        state = next;
+#[inline]
+pub fn best(row: &[f64; ACTION_COUNT], allowed: usize) -> f64 {
+    let mut m = row[0];
+    // Q-values are never NaN (updates that would make one are refused), so a plain
+    // comparison does, without f64::max's NaN handling.
+    for &q in &row[1..allowed] {
+        m = if q > m { q } else { m };
     }
-    let start = &table.q[State::START.index()];
-    m.start_value = State::START
-        .allowed_actions()
-        .iter()
-        .map(|a| start[a.index()])
-        .fold(f64::NEG_INFINITY, f64::max);
     m
+}
+
+/// Unnormalised softmax of one state's row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Softmax {
+    /// exp((Q - max Q) / T) for the allowed actions, 0 for the rest.
+    pub weights: [f64; ACTION_COUNT],
+    /// Their sum (at least 1: the greedy actions weigh exactly 1).
+    pub total: f64,
+    /// max Q over the allowed actions.
+    pub best: f64,
+}
+
+/// Softmax weights of the first `allowed` actions. Subtracting the max gives the paper's
+/// probabilities without overflow.
+#[inline]
+pub fn softmax_weights(row: &[f64; ACTION_COUNT], allowed: usize, temperature: f64) -> Softmax {
+    let m = best(row, allowed);
+    let mut w = [0.0; ACTION_COUNT];
+    let mut total = 0.0;
+    for a in 0..allowed {
+        let d = row[a] - m;
+        // exp(0) = 1 needs no call: saves one exp per step in the hot loop.
+        w[a] = if d == 0.0 {
+            1.0
+        } else {
+            (d / temperature).exp()
+        };
+        total += w[a];
+    }
+    Softmax {
+        weights: w,
+        total,
+        best: m,
+    }
+}
+
+/// The action whose cumulative weight first exceeds `u * total`, for u uniform in [0, 1).
+/// Counted without branches (how many cumulative sums are <= the target): the draw is
+/// unpredictable, and a mispredicted branch costs more than the comparisons.
+#[inline]
+pub fn sample_weights(w: &[f64; ACTION_COUNT], allowed: usize, total: f64, u: f64) -> usize {
+    let target = u * total;
+    let mut cumulative = 0.0;
+    let mut below = 0;
+    for &wa in w.iter().take(allowed) {
+        cumulative += wa;
+        below += usize::from(cumulative <= target);
+    }
+    if below < allowed {
+        below
+    } else {
+        // Only when rounding puts u * total at the very top: the last action that can be drawn.
+        (0..allowed).rev().find(|&a| w[a] > 0.0).unwrap_or(0)
+    }
+}
+
+/// The greedy actions among the first `allowed`, as a bit set, and how many there are.
+#[inline]
+pub fn greedy_set(row: &[f64; ACTION_COUNT], allowed: usize) -> (u8, u32) {
+    let m = best(row, allowed);
+    let mut set = 0u8;
+    for (a, &q) in row.iter().enumerate().take(allowed) {
+        if q == m {
+            set |= 1 << a;
+        }
+    }
+    (set, set.count_ones())
+}
+
+/// The `k`-th (0-based) member of a bit set.
+#[inline]
+pub fn nth_member(set: u8, k: u32) -> usize {
+    let mut s = set;
+    for _ in 0..k {
+        s &= s - 1;
+    }
+    s.trailing_zeros() as usize
+}
+
+/// The Q-learning target: r + γ max_a' Q(s', a'), or r alone on a session's last step (the
+/// authors' episode end).
+#[inline]
+pub fn td_target(reward: f64, gamma: f64, next_row: &[f64; ACTION_COUNT], last: bool) -> f64 {
+    if last {
+        reward
+    } else {
+        reward + gamma * best(next_row, ACTION_COUNT)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use sequence_game::{Feedback, Level, Prediction};
 
-    fn model(p: [f64; 3], e: f64) -> UserModelTable {
-        UserModelTable::tabulate(
-            0,
-            |i| Prediction {
-                mean: p[i.level.index()],
-                std: 0.0,
-            },
-            |_, _| Prediction { mean: e, std: 0.0 },
-        )
+    #[test]
+    fn temperature_follows_the_authors_schedule() {
+        let t = TemperatureSchedule::default();
+        assert_eq!(t.at(1), 295.0);
+        assert_eq!(t.at(59), 5.0);
+        assert_eq!(t.at(60), 0.5);
+        assert_eq!(t.at(10_000), 0.5);
     }
 
     #[test]
-    fn start_state_masks_feedback_and_softmax_is_stable() {
-        let mut t = QTable::default();
-        t.q[0] = [1e6, -1e6, 0.0, 5e6, 5e6];
-        let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let l = Learning {
-            min_temperature: 0.5,
-            ..Default::default()
-        };
-        t.visits[0] = 1000;
-        for _ in 0..100 {
-            let c = t.choose(State::START, Mode::Explore, &l, &mut rng);
-            assert!(!c.action.is_feedback());
-            assert!(c.probabilities.iter().all(|p| p.is_finite()));
-            assert_eq!(c.probabilities[3], 0.0);
+    fn softmax_matches_the_textbook_formula_and_survives_huge_values() {
+        let row = [1.0, 2.0, 0.5, -1.0, 3.0];
+        let t = 1.7;
+        let Softmax {
+            weights: w, total, ..
+        } = softmax_weights(&row, 5, t);
+        let plain: Vec<f64> = row.iter().map(|q| (q / t).exp()).collect();
+        let plain_total: f64 = plain.iter().sum();
+        for a in 0..5 {
+            assert!((w[a] / total - plain[a] / plain_total).abs() < 1e-12);
         }
-        assert_eq!(t.temperature(State::START, &l), 0.5);
-        assert_eq!(QTable::default().temperature(State::START, &l), 295.0);
+        // The start state masks a4 and a5.
+        let w = softmax_weights(&row, 3, t).weights;
+        assert_eq!((w[3], w[4]), (0.0, 0.0));
+        // Without subtracting the max, exp(1e6 / 0.5) is infinite and the probabilities NaN.
+        let s = softmax_weights(&[1e6, -1e6, 0.0, 5e6, 5e6], 5, 0.5);
+        assert!(s.weights.iter().all(|x| x.is_finite()) && s.total == 2.0 && s.best == 5e6);
     }
 
     #[test]
-    fn update_follows_the_formula_and_skips_bootstrap_at_the_end() {
-        let l = Learning::default();
-        let mut t = QTable::default();
-        let s = State::new(1, 0, 1).expect("state");
-        let n = State::new(2, 0, 1).expect("state");
-        t.q[n.index()] = [0.0, 2.0, 0.0, 0.0, 0.0];
-        t.update(s, Action::SetLevel(Level::TWO), 1.0, n, false, &l);
-        assert!((t.q[s.index()][1] - 0.05 * (1.0 + 0.95 * 2.0)).abs() < 1e-12);
-        let mut t2 = QTable::default();
-        t2.q[n.index()] = [0.0, 2.0, 0.0, 0.0, 0.0];
-        t2.update(s, Action::Encourage, 1.0, n, true, &l);
-        assert!((t2.q[s.index()][3] - 0.05).abs() < 1e-12);
+    fn sampling_walks_the_cumulative_weights() {
+        let w = [1.0, 0.0, 3.0, 0.0, 0.0];
+        assert_eq!(sample_weights(&w, 5, 4.0, 0.0), 0);
+        assert_eq!(sample_weights(&w, 5, 4.0, 0.2499), 0);
+        assert_eq!(sample_weights(&w, 5, 4.0, 0.25), 2);
+        assert_eq!(sample_weights(&w, 5, 4.0, 0.999_999), 2);
+        // A zero-weight action is never drawn, even at the top edge.
+        assert_eq!(sample_weights(&w, 5, 4.0, 1.0), 2);
     }
 
     #[test]
-    fn learns_the_best_level_for_a_user_who_always_succeeds() {
-        let m = model([1.0, 1.0, 1.0], 0.0);
-        let l = Learning::default();
-        let mut t = QTable::default();
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        for s in 0..20_000 {
-            simulate_session(&mut t, &m, &l, Mode::Explore, s % 100 == 0, &mut rng);
+    fn greedy_set_lists_ties_within_the_allowed_actions() {
+        let (set, n) = greedy_set(&[2.0, 1.0, 2.0, 9.0, 2.0], 3);
+        assert_eq!((set, n), (0b101, 2));
+        assert_eq!(nth_member(set, 0), 0);
+        assert_eq!(nth_member(set, 1), 2);
+        let (set, n) = greedy_set(&[2.0, 1.0, 2.0, 9.0, 2.0], 5);
+        assert_eq!((nth_member(set, 0), n), (3, 1));
+    }
+
+    #[test]
+    fn rewards_are_re_re_plus_beta_e_and_lambda_e() {
+        let mut l = Learning::default();
+        assert_eq!(l.reward(3.0, 0.5), 3.0);
+        l.reward = Reward::RePlusBetaE;
+        assert_eq!(l.reward(-1.0, 0.5), 0.5);
+        l.reward = Reward::LambdaE;
+        assert_eq!(l.reward(2.0, -0.25), -0.75);
+        for r in Reward::ALL {
+            assert_eq!(Reward::parse(r.name()), Some(r));
         }
-        let greedy = simulate_session(&mut t, &m, &l, Mode::Exploit, false, &mut rng);
-        assert_eq!(greedy.score, 30.0, "always level 3");
-        let _ = Feedback::None;
+        assert_eq!(Reward::parse("RE+E"), None);
     }
 }

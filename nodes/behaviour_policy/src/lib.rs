@@ -1,13 +1,25 @@
 //! The paper's behaviour model B (section "Robot Behaviour Model", Algorithm 1): tabular
 //! Q-learning over states (L, F, PS) with actions a1..a5, softmax exploration with a per-state
-//! temperature, rewards RE / RE + βE / λE against a cluster's user model, policy transfer, the
-//! experiments of the evaluation with plots, Q-table files, and the decision node's core.
+//! temperature, rewards RE / RE + βE / λE against a cluster's user model, an exploitation-only
+//! mode, policy transfer, the evaluation's experiments with Figs. 4 and 5, Q-table files, and
+//! the sans-IO core of the decision node. Depends on user models only through
+//! `sequence_game::UserModelTable`.
 
 pub mod experiments;
+pub mod grid;
 pub mod learning;
+pub mod params;
+pub mod persistent;
 pub mod plot;
 pub mod policy_core;
 pub mod q_table_file;
+pub mod reference_tables;
+pub mod report;
+pub mod simulation;
+pub mod softmax_cache;
 
-pub use learning::{Learning, Mode, QTable, Reward};
-pub use policy_core::{PolicyCore, PolicyError, PolicyParams};
+pub use learning::{Learning, Mode, QTable, Reward, TemperatureSchedule};
+pub use params::BehaviourPolicyParams;
+pub use persistent::{PersistentError, PersistentPolicy};
+pub use policy_core::{Decision, PolicyCore, PolicyError, Transition};
+pub use q_table_file::{QTableError, QTableFile, QTableOwner};

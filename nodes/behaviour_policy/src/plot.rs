@@ -1,98 +1,114 @@
-//! The paper's Figs. 4 and 5: mean ± std across runs per epoch, one line per configuration,
-//! one panel per user model; score (Fig. 4) or engagement (Fig. 5).
+//! The paper's Figs. 4 and 5 as SVG: per epoch the mean ± std band across runs, one line per
+//! configuration (three rewards and the transfer into that model), one panel per user model.
 
-use crate::experiments::Curve;
+use crate::experiments::EpochMetrics;
+use crate::grid::Curve;
 use plotters::prelude::*;
 
-const COLOURS: [RGBColor; 5] = [
+const COLOURS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
     RGBColor(255, 127, 14),
+    RGBColor(23, 190, 207),
 ];
+
+/// Which metric a figure shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Figure {
+    /// Fig. 4: mean accumulated score per session.
+    Score,
+    /// Fig. 5: mean engagement.
+    Engagement,
+}
+
+impl Figure {
+    fn value(self, e: &EpochMetrics) -> f64 {
+        match self {
+            Figure::Score => e.score,
+            Figure::Engagement => e.engagement,
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Figure::Score => "performance score (mean per session)",
+            Figure::Engagement => "engagement (mean per session)",
+        }
+    }
+}
 
 fn err<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
 
-/// `score` true: Fig. 4 (mean accumulated score); false: Fig. 5 (mean engagement).
-pub fn curves_svg(curves: &[Curve], models: usize, score: bool) -> Result<String, String> {
+/// Draws the figure; `subtitle` says where the numbers came from.
+pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<String, String> {
+    let mut clusters: Vec<usize> = curves.iter().map(|c| c.config.cluster).collect();
+    clusters.sort_unstable();
+    clusters.dedup();
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1200, 460)).into_drawing_area();
+        let width = 40 + 600 * clusters.len().max(1) as u32;
+        let root = SVGBackend::with_string(&mut svg, (width, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
-        let panels = root.split_evenly((1, models.max(1)));
-        for (m, panel) in panels.iter().enumerate() {
-            let mine: Vec<&Curve> = curves.iter().filter(|c| c.config.model == m).collect();
+        let root = root
+            .titled(
+                subtitle,
+                ("sans-serif", 14).into_font().color(&BLACK.mix(0.7)),
+            )
+            .map_err(err)?;
+        let panels = root.split_evenly((1, clusters.len().max(1)));
+        for (panel, &k) in panels.iter().zip(&clusters) {
+            let mine: Vec<&Curve> = curves.iter().filter(|c| c.config.cluster == k).collect();
             let epochs = mine.iter().map(|c| c.mean.len()).max().unwrap_or(1).max(2);
-            let value =
-                |e: &crate::experiments::EpochMetrics| if score { e.score } else { e.engagement };
-            let (lo, hi) = mine
-                .iter()
-                .flat_map(|c| {
-                    c.mean
-                        .iter()
-                        .zip(&c.std)
-                        .map(|(a, s)| (value(a) - value(s), value(a) + value(s)))
-                })
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), (a, b)| {
-                    (l.min(a), h.max(b))
-                });
-            let (lo, hi) = if lo.is_finite() {
-                (
-                    lo - 0.05 * (hi - lo).abs().max(0.1),
-                    hi + 0.05 * (hi - lo).abs().max(0.1),
-                )
-            } else {
-                (0.0, 1.0)
-            };
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for c in &mine {
+                for (m, s) in c.mean.iter().zip(&c.std) {
+                    lo = lo.min(figure.value(m) - figure.value(s));
+                    hi = hi.max(figure.value(m) + figure.value(s));
+                }
+            }
+            if !(lo.is_finite() && hi.is_finite()) {
+                (lo, hi) = (0.0, 1.0);
+            }
+            // Room below the curves for the legend.
+            let range = (hi - lo).max(0.1);
+            let (bottom, top) = (lo - 0.32 * range, hi + 0.05 * range);
             let mut chart = ChartBuilder::on(panel)
-                .caption(
-                    format!(
-                        "M{} ({})",
-                        m + 1,
-                        if score {
-                            "performance score"
-                        } else {
-                            "engagement"
-                        }
-                    ),
-                    ("sans-serif", 18),
-                )
-                .margin(12)
-                .x_label_area_size(38)
-                .y_label_area_size(50)
-                .build_cartesian_2d(1.0..epochs as f64, lo..hi)
+                .caption(format!("M{} (cluster {k})", k + 1), ("sans-serif", 20))
+                .margin(14)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
+                .build_cartesian_2d(1.0..epochs as f64, bottom..top)
                 .map_err(err)?;
             chart
                 .configure_mesh()
                 .x_desc("epoch (100 sessions)")
-                .y_desc(if score {
-                    "mean score per session"
-                } else {
-                    "mean engagement"
-                })
+                .x_label_formatter(&|x| format!("{x:.0}"))
+                .y_label_formatter(&|y| format!("{y:.2}"))
+                .y_desc(figure.label())
+                .light_line_style(WHITE.mix(0.0))
                 .draw()
                 .map_err(err)?;
             for (i, c) in mine.iter().enumerate() {
                 let colour = COLOURS[i % COLOURS.len()];
-                let upper: Vec<(f64, f64)> = c
+                let x = |e: usize| (e + 1) as f64;
+                let upper = c
                     .mean
                     .iter()
                     .zip(&c.std)
                     .enumerate()
-                    .map(|(e, (a, s))| ((e + 1) as f64, value(a) + value(s)))
-                    .collect();
+                    .map(|(e, (m, s))| (x(e), figure.value(m) + figure.value(s)));
                 let lower: Vec<(f64, f64)> = c
                     .mean
                     .iter()
                     .zip(&c.std)
                     .enumerate()
-                    .rev()
-                    .map(|(e, (a, s))| ((e + 1) as f64, value(a) - value(s)))
+                    .map(|(e, (m, s))| (x(e), figure.value(m) - figure.value(s)))
                     .collect();
-                let band: Vec<(f64, f64)> = upper.into_iter().chain(lower).collect();
+                let band: Vec<(f64, f64)> = upper.chain(lower.into_iter().rev()).collect();
                 chart
                     .draw_series(std::iter::once(Polygon::new(
                         band,
@@ -104,7 +120,7 @@ pub fn curves_svg(curves: &[Curve], models: usize, score: bool) -> Result<String
                         c.mean
                             .iter()
                             .enumerate()
-                            .map(|(e, a)| ((e + 1) as f64, value(a))),
+                            .map(|(e, m)| (x(e), figure.value(m))),
                         colour.stroke_width(2),
                     ))
                     .map_err(err)?

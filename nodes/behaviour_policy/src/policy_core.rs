@@ -1,281 +1,265 @@
-//! The behaviour-policy node's core, sans-IO: answers `DecideAction` with an explained
-//! `Decision` (all Q-values, probabilities, temperature, explored or not), refuses feedback on
-//! the first sequence, learns online from every `SequenceResult`, and saves the cluster's
-//! Q-table atomically after each update.
+//! The live policy, sans-IO: given (state, step in the session) it returns an explained
+//! `Decision`; given an observed sequence result it applies Algorithm 1's update. Data in,
+//! data out: the node moves messages and saves files (see `persistent`).
 
-use crate::learning::{Learning, Mode, QTable, Reward};
-use crate::q_table_file::{QTableError, QTableFile};
-use qt_therapy_msgs::{
-    BehaviourState, DecideActionRequest, Decision, SequenceResult, std_msgs::Header,
+use crate::learning::{
+    Learning, Mode, QTable, allowed_count, greedy_set, nth_member, sample_weights, softmax_weights,
+    td_target,
 };
-use rand::SeedableRng;
+use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sequence_game::{Action, State, UserModelTable};
-use std::path::{Path, PathBuf};
+use sequence_game::{ACTION_COUNT, Action, Feedback, LEVEL_COUNT, Level, State};
 
-/// Parameters of the node (`params/behaviour_policy.yaml`).
-#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct PolicyParams {
-    pub user_model_file: String,
-    pub q_table_dir: String,
-    pub exploitation_only: bool,
-    pub seed: i64,
-    pub default_cluster: i64,
-    pub reward: String,
-    pub alpha: f64,
-    pub gamma: f64,
-    pub initial_temperature: f64,
-    pub min_temperature: f64,
-    pub temperature_decay: f64,
-    pub beta: f64,
-    pub lambda: f64,
-    pub pretrain_epochs: i64,
-}
-
-impl Default for PolicyParams {
-    fn default() -> Self {
-        PolicyParams {
-            user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
-            q_table_dir: "out/q_tables".into(),
-            exploitation_only: true,
-            seed: 7,
-            default_cluster: 0,
-            reward: "RE+bE".into(),
-            alpha: 0.05,
-            gamma: 0.95,
-            initial_temperature: 300.0,
-            min_temperature: 0.5,
-            temperature_decay: 5.0,
-            beta: 3.0,
-            lambda: 3.0,
-            pretrain_epochs: 100,
-        }
-    }
-}
-
-#[derive(Debug, thiserror::Error)]
+/// Why the policy refused a request; nothing was changed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PolicyError {
-    #[error("parameter {key}: {reason}")]
-    Parameter { key: &'static str, reason: String },
-    #[error("unknown user model cluster {cluster}: the policy holds {count}")]
-    UnknownCluster { cluster: i64, count: usize },
-    #[error("state {0}")]
-    State(String),
+    #[error("state (L={level}, F={feedback}, PS={previous_score}) is outside the state space")]
+    StateOutsideSpace {
+        level: u8,
+        feedback: u8,
+        previous_score: i8,
+    },
+    #[error("step {0}: steps in a session count from 1")]
+    Step(u8),
+    #[error("action {action} is not allowed in {state}")]
+    ActionNotAllowed { action: Action, state: State },
+    #[error(
+        "next state {next} does not follow {action} taken in {state} (expected L={level}, F={feedback})"
+    )]
+    NextStateMismatch {
+        state: State,
+        action: Action,
+        next: State,
+        level: u8,
+        feedback: u8,
+    },
+    #[error("next state is the start state: a sequence always has a level")]
+    NextIsStart,
     #[error("engagement {0} is not a number in [-1, 1]")]
-    Engagement(f32),
-    #[error(transparent)]
-    QTable(#[from] QTableError),
+    Engagement(f64),
+    #[error("activity result {0} is not a number in [-1, {LEVEL_COUNT}]")]
+    ActivityResult(f64),
+    #[error("the update of Q({state}, {action}) would give {value}; the table is unchanged")]
+    NotFinite {
+        state: State,
+        action: Action,
+        value: f64,
+    },
 }
 
-impl PolicyParams {
-    pub fn learning(&self) -> Result<Learning, PolicyError> {
-        let reward = Reward::parse(&self.reward).ok_or_else(|| PolicyError::Parameter {
-            key: "reward",
-            reason: format!("{:?} is not RE, RE+bE or lE", self.reward),
-        })?;
-        let positive = |key, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(PolicyError::Parameter {
-                    key,
-                    reason: format!("{v} must be positive"),
-                })
-            }
-        };
-        positive("alpha", self.alpha)?;
-        positive("initial_temperature", self.initial_temperature)?;
-        positive("min_temperature", self.min_temperature)?;
-        if !(0.0..=1.0).contains(&self.gamma) {
-            return Err(PolicyError::Parameter {
-                key: "gamma",
-                reason: format!("{} is outside [0, 1]", self.gamma),
-            });
-        }
-        Ok(Learning {
-            alpha: self.alpha,
-            gamma: self.gamma,
-            initial_temperature: self.initial_temperature,
-            min_temperature: self.min_temperature,
-            temperature_decay: self.temperature_decay,
-            beta: self.beta,
-            lambda: self.lambda,
-            reward,
-            // The live game reports the result it just saw.
-            state_lags_result: false,
-        })
-    }
+/// One decision with everything it was based on, so it can be explained to the therapist.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    pub state: State,
+    /// 1-based sequence in the session this action sets up.
+    pub step: u8,
+    pub action: Action,
+    pub level: Level,
+    pub feedback: Feedback,
+    /// Q(s, a) for a1..a5 (masked actions included, as stored).
+    pub q_values: [f64; ACTION_COUNT],
+    /// Probability each action had: softmax, or uniform over the greedy ties when exploiting;
+    /// 0 for masked actions.
+    pub probabilities: [f64; ACTION_COUNT],
+    /// How many of a1..a5 were allowed (3 at the first sequence or in the start state).
+    pub allowed_actions: usize,
+    /// T_s (reported in exploitation too, where it is not used).
+    pub temperature: f64,
+    /// A non-greedy action was drawn.
+    pub explored: bool,
+    pub mode: Mode,
 }
 
-/// One cluster's live policy.
-struct ClusterPolicy {
-    file: QTableFile,
-    path: PathBuf,
+/// An observed sequence: what the policy learns from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transition {
+    pub state: State,
+    pub action: Action,
+    /// RE: L on success, -1 on failure.
+    pub activity_result: f64,
+    /// Mean engagement E over the sequence, in [-1, 1].
+    pub engagement: f64,
+    pub next_state: State,
+    /// The session's last sequence: no bootstrap.
+    pub is_last: bool,
 }
 
-/// The node's core.
+/// What an update did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Update {
+    pub reward: f64,
+    pub old_q: f64,
+    pub new_q: f64,
+}
+
+/// One Q-table (a cluster's or a user's) with its learning constants and random stream.
+#[derive(Debug, Clone)]
 pub struct PolicyCore {
-    clusters: Vec<ClusterPolicy>,
+    table: QTable,
     learning: Learning,
     mode: Mode,
-    default_cluster: i64,
     rng: ChaCha8Rng,
+    updates: u64,
+}
+
+/// A state built by hand (its fields are public) may not be one of the 64.
+pub fn check_state(state: State) -> Result<State, PolicyError> {
+    match State::new(
+        state.level.into(),
+        state.feedback as i64,
+        state.previous_score.into(),
+    ) {
+        Ok(s) if s == state => Ok(s),
+        _ => Err(PolicyError::StateOutsideSpace {
+            level: state.level,
+            feedback: state.feedback as u8,
+            previous_score: state.previous_score,
+        }),
+    }
 }
 
 impl PolicyCore {
-    /// Loads each cluster's Q-table from `q_table_dir/cluster_<k>.json`, or pretrains one in
-    /// simulation against that cluster's user model (and saves it) when there is none.
-    pub fn new(
-        params: &PolicyParams,
-        models: &[UserModelTable],
-        base: &Path,
-    ) -> Result<PolicyCore, PolicyError> {
-        let learning = params.learning()?;
-        let dir = base.join(&params.q_table_dir);
-        let mut clusters = Vec::new();
-        for (k, model) in models.iter().enumerate() {
-            let path = dir.join(format!("cluster_{k}.json"));
-            let file = if path.exists() {
-                QTableFile::load(&path)?
-            } else {
-                let epochs = usize::try_from(params.pretrain_epochs).unwrap_or(0);
-                let run = crate::experiments::train_run(
-                    model,
-                    &learning,
-                    Mode::Explore,
-                    QTable::default(),
-                    epochs,
-                    100,
-                    crate::experiments::run_seed(params.seed as u64, k, 0),
-                );
-                let f = QTableFile::new(
-                    &format!("cluster {k}"),
-                    &format!(
-                        "pretrained in simulation: {epochs} epochs x 100 sessions, reward {}, against {}",
-                        learning.reward.name(),
-                        params.user_model_file
-                    ),
-                    run.q_table,
-                );
-                f.save(&path)?;
-                f
-            };
-            clusters.push(ClusterPolicy { file, path });
-        }
-        Ok(PolicyCore {
-            clusters,
+    pub fn new(table: QTable, learning: Learning, mode: Mode, seed: u64, updates: u64) -> Self {
+        PolicyCore {
+            table,
             learning,
-            mode: if params.exploitation_only {
-                Mode::Exploit
-            } else {
-                Mode::Explore
-            },
-            default_cluster: params.default_cluster,
-            rng: ChaCha8Rng::seed_from_u64(params.seed as u64),
-        })
-    }
-
-    fn cluster_index(&self, cluster: i32) -> Result<usize, PolicyError> {
-        let c = if cluster < 0 {
-            self.default_cluster
-        } else {
-            i64::from(cluster)
-        };
-        usize::try_from(c)
-            .ok()
-            .filter(|c| *c < self.clusters.len())
-            .ok_or(PolicyError::UnknownCluster {
-                cluster: c,
-                count: self.clusters.len(),
-            })
-    }
-
-    /// The next action for a (validated) request.
-    pub fn decide(
-        &mut self,
-        request: &DecideActionRequest,
-        header: Header,
-    ) -> Result<Decision, PolicyError> {
-        let k = self.cluster_index(request.user_model_cluster)?;
-        let state = request
-            .state
-            .to_state()
-            .map_err(|e| PolicyError::State(e.reason))?;
-        // The first sequence has no context for feedback: only the start state's actions.
-        let state = if request.step == 1 {
-            State::START
-        } else {
-            state
-        };
-        let policy = &self.clusters[k];
-        let choice = policy
-            .file
-            .table
-            .choose(state, self.mode, &self.learning, &mut self.rng);
-        let (level, feedback) = choice
-            .action
-            .apply(state)
-            .ok_or_else(|| PolicyError::State(format!("{state} allows no {}", choice.action)))?;
-        Ok(Decision {
-            header,
-            session_id: request.session_id.clone(),
-            step: request.step,
-            state: BehaviourState::from_state(state),
-            action: choice.action.index() as u8,
-            level: level.get(),
-            feedback: feedback as u8,
-            q_values: choice.q_values.to_vec(),
-            probabilities: choice.probabilities.to_vec(),
-            temperature: choice.temperature,
-            explored: choice.explored,
-            exploitation_only: self.mode == Mode::Exploit,
-            model_used: format!(
-                "cluster {k} ({}, {} updates)",
-                policy.path.display(),
-                policy.file.updates
-            ),
-        })
-    }
-
-    /// Learns from one played sequence and saves the Q-table.
-    pub fn learn(&mut self, result: &SequenceResult) -> Result<(), PolicyError> {
-        let k = self.cluster_index(result.user_model_cluster)?;
-        if !(result.engagement.is_finite() && (-1.0..=1.0).contains(&result.engagement)) {
-            return Err(PolicyError::Engagement(result.engagement));
+            mode,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            updates,
         }
-        let state = result
-            .state
-            .to_state()
-            .map_err(|e| PolicyError::State(e.reason))?;
-        let action =
-            Action::new(result.action.into()).map_err(|e| PolicyError::State(e.to_string()))?;
-        let next = State::new(
-            result.level.into(),
-            result.feedback.into(),
-            i64::from(result.level) * i64::from(result.outcome),
-        )
-        .map_err(|e| PolicyError::State(e.to_string()))?;
-        // No face was seen: E is unknown, so it counts as neutral (0) and only RE speaks.
-        let engagement = if result.engagement_per_second.is_empty() {
-            0.0
+    }
+
+    pub fn q_table(&self) -> &QTable {
+        &self.table
+    }
+
+    pub fn learning(&self) -> &Learning {
+        &self.learning
+    }
+
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Updates applied since the table was created (kept in its file).
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    /// The action for the sequence `step` (1-based) from `state`. At the first sequence only
+    /// a1..a3 are allowed: there is no context for feedback yet.
+    pub fn decide(&mut self, state: State, step: u8) -> Result<Decision, PolicyError> {
+        let state = check_state(state)?;
+        if step == 0 {
+            return Err(PolicyError::Step(step));
+        }
+        let allowed = if step == 1 {
+            LEVEL_COUNT
         } else {
-            f64::from(result.engagement)
+            allowed_count(state)
         };
-        let reward = self
+        let row = *self.table.row(state);
+        let temperature = self
             .learning
-            .reward(f64::from(result.activity_result), engagement);
-        let policy = &mut self.clusters[k];
-        policy.file.table.update(
+            .temperature
+            .at(self.table.visits[state.index()]);
+        let mut probabilities = [0.0; ACTION_COUNT];
+        let (index, explored) = match self.mode {
+            Mode::Explore => {
+                let s = softmax_weights(&row, allowed, temperature);
+                for (p, w) in probabilities.iter_mut().zip(&s.weights).take(allowed) {
+                    *p = w / s.total;
+                }
+                let a = sample_weights(&s.weights, allowed, s.total, self.rng.random::<f64>());
+                (a, row[a] < s.best)
+            }
+            Mode::Exploit => {
+                let (set, n) = greedy_set(&row, allowed);
+                for (a, p) in probabilities.iter_mut().enumerate() {
+                    if set & (1 << a) != 0 {
+                        *p = 1.0 / f64::from(n);
+                    }
+                }
+                let k = if n > 1 {
+                    self.rng.random_range(0..n)
+                } else {
+                    0
+                };
+                (nth_member(set, k), false)
+            }
+        };
+        let action = Action::ALL[index];
+        // A feedback action repeats the state's level; at step 1 only a1..a3 can be drawn.
+        let (level, feedback) = action
+            .apply(state)
+            .ok_or(PolicyError::ActionNotAllowed { action, state })?;
+        Ok(Decision {
             state,
+            step,
             action,
+            level,
+            feedback,
+            q_values: row,
+            probabilities,
+            allowed_actions: allowed,
+            temperature,
+            explored,
+            mode: self.mode,
+        })
+    }
+
+    /// Q(s, a) += α (F_r(RE, E) + γ max Q(s', ·) − Q(s, a)), without the bootstrap on the
+    /// session's last sequence; the state's visit count (its temperature) goes up by one.
+    /// Refuses bad input and any update that would leave a non-finite Q-value.
+    pub fn learn(&mut self, t: &Transition) -> Result<Update, PolicyError> {
+        let state = check_state(t.state)?;
+        let next = check_state(t.next_state)?;
+        if !(t.engagement.is_finite() && (-1.0..=1.0).contains(&t.engagement)) {
+            return Err(PolicyError::Engagement(t.engagement));
+        }
+        if !(t.activity_result.is_finite()
+            && (-1.0..=LEVEL_COUNT as f64).contains(&t.activity_result))
+        {
+            return Err(PolicyError::ActivityResult(t.activity_result));
+        }
+        let (level, feedback) = t.action.apply(state).ok_or(PolicyError::ActionNotAllowed {
+            action: t.action,
+            state,
+        })?;
+        if next.is_start() {
+            return Err(PolicyError::NextIsStart);
+        }
+        if next.level != level.get() || next.feedback != feedback {
+            return Err(PolicyError::NextStateMismatch {
+                state,
+                action: t.action,
+                next,
+                level: level.get(),
+                feedback: feedback as u8,
+            });
+        }
+        let reward = self.learning.reward(t.activity_result, t.engagement);
+        let target = td_target(reward, self.learning.gamma, self.table.row(next), t.is_last);
+        let old_q = self.table.row(state)[t.action.index()];
+        let new_q = old_q + self.learning.alpha * (target - old_q);
+        if !new_q.is_finite() {
+            return Err(PolicyError::NotFinite {
+                state,
+                action: t.action,
+                value: new_q,
+            });
+        }
+        self.table.q[state.index()][t.action.index()] = new_q;
+        let visits = &mut self.table.visits[state.index()];
+        *visits = visits.saturating_add(1);
+        self.updates += 1;
+        Ok(Update {
             reward,
-            next,
-            result.sequence_index >= 10,
-            &self.learning,
-        );
-        policy.file.updates += 1;
-        policy.file.save(&policy.path)?;
-        Ok(())
+            old_q,
+            new_q,
+        })
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,9 +1,9 @@
-//! Q-tables on disk: one versioned JSON file per cluster (or user), written through a temporary
-//! file and a rename after every update, so a crash loses nothing already learned and a reader
-//! never sees half a table.
+//! Q-tables on disk: one versioned JSON file per cluster or user, a row per state that names
+//! its (L, F, PS). Written through a temporary file and a rename, so a reader never sees half
+//! a table; a corrupt or wrong-version file is refused with its path and the field at fault.
 
 use crate::learning::QTable;
-use sequence_game::{ACTION_COUNT, STATE_COUNT};
+use sequence_game::{ACTION_COUNT, STATE_COUNT, State};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -14,119 +14,283 @@ pub const VERSION: u32 = 1;
 pub enum QTableError {
     #[error("{path}: {reason}")]
     File { path: PathBuf, reason: String },
+    #[error("{path}, field {field}: {reason}")]
+    Field {
+        path: PathBuf,
+        field: String,
+        reason: String,
+    },
     #[error("{path} is q_table format version {found}; this program reads version {VERSION}")]
     Version { path: PathBuf, found: u64 },
+    #[error("user id {0:?} cannot name a file: use letters, digits, '-' and '_' only")]
+    UserId(String),
 }
 
-/// The file's content.
+/// Whose table it is: a cluster's (shared by its users) or one user's.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum QTableOwner {
+    Cluster(usize),
+    User(String),
+}
+
+impl QTableOwner {
+    /// `cluster_<k>.json` or `user_<id>.json`.
+    pub fn file_name(&self) -> Result<String, QTableError> {
+        match self {
+            QTableOwner::Cluster(k) => Ok(format!("cluster_{k}.json")),
+            QTableOwner::User(id) => {
+                let ok = !id.is_empty()
+                    && id.len() <= 64
+                    && id
+                        .chars()
+                        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+                if ok {
+                    Ok(format!("user_{id}.json"))
+                } else {
+                    Err(QTableError::UserId(id.chars().take(80).collect()))
+                }
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for QTableOwner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            QTableOwner::Cluster(k) => write!(f, "cluster {k}"),
+            QTableOwner::User(u) => write!(f, "user {u}"),
+        }
+    }
+}
+
+/// One state's row as stored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StateRow {
+    pub level: u8,
+    pub feedback: u8,
+    pub previous_score: i8,
+    pub q: [f64; ACTION_COUNT],
+    pub visits: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Stored {
+    format: String,
+    version: u32,
+    owner: QTableOwner,
+    provenance: String,
+    updates: u64,
+    states: Vec<StateRow>,
+}
+
+/// A Q-table with whose it is and where it came from.
+#[derive(Debug, Clone, PartialEq)]
 pub struct QTableFile {
-    pub format: String,
-    pub version: u32,
-    /// The cluster (or user) this table is for.
-    pub owner: String,
-    /// How it came about (pretraining, sessions learned from).
+    pub owner: QTableOwner,
+    /// How it came about (pretraining, transfer, live sessions).
     pub provenance: String,
+    /// Updates applied since it was created.
     pub updates: u64,
     pub table: QTable,
 }
 
 impl QTableFile {
-    pub fn new(owner: &str, provenance: &str, table: QTable) -> Self {
-        QTableFile {
-            format: FORMAT.into(),
-            version: VERSION,
-            owner: owner.into(),
-            provenance: provenance.into(),
-            updates: 0,
-            table,
-        }
-    }
-
     pub fn load(path: &Path) -> Result<QTableFile, QTableError> {
         let bad = |reason: String| QTableError::File {
             path: path.into(),
+            reason,
+        };
+        let field = |field: String, reason: String| QTableError::Field {
+            path: path.into(),
+            field,
             reason,
         };
         let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
         let value: serde_json::Value =
             serde_json::from_str(&text).map_err(|e| bad(format!("not JSON (truncated?): {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
-            return Err(bad(format!(
-                "not a Q-table file (its \"format\" is not {FORMAT:?})"
-            )));
+            return Err(field(
+                "format".into(),
+                format!("is not {FORMAT:?}: not a Q-table file"),
+            ));
         }
-        let found = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if found != u64::from(VERSION) {
-            return Err(QTableError::Version {
-                path: path.into(),
-                found,
-            });
+        match value.get("version").and_then(serde_json::Value::as_u64) {
+            Some(v) if v == u64::from(VERSION) => {}
+            Some(found) => {
+                return Err(QTableError::Version {
+                    path: path.into(),
+                    found,
+                });
+            }
+            None => return Err(field("version".into(), "is missing".into())),
         }
-        let file: QTableFile = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
-        if file.table.q.len() != STATE_COUNT || file.table.visits.len() != STATE_COUNT {
-            return Err(bad(format!(
-                "the table has {} states, expected {STATE_COUNT}",
-                file.table.q.len()
-            )));
+        let stored: Stored =
+            serde_json::from_value(value).map_err(|e| bad(format!("malformed: {e}")))?;
+        if stored.states.len() != STATE_COUNT {
+            return Err(field(
+                "states".into(),
+                format!("has {} rows, expected {STATE_COUNT}", stored.states.len()),
+            ));
         }
-        if let Some((s, _)) = file
-            .table
-            .q
-            .iter()
-            .enumerate()
-            .find(|(_, row)| row.iter().any(|q| !q.is_finite()))
-        {
-            return Err(bad(format!("Q-values of state {s} are not finite")));
+        let mut table = QTable::default();
+        let mut seen = [false; STATE_COUNT];
+        for (i, row) in stored.states.iter().enumerate() {
+            let at = |reason: String| field(format!("states[{i}]"), reason);
+            let state = State::new(
+                row.level.into(),
+                row.feedback.into(),
+                row.previous_score.into(),
+            )
+            .map_err(|e| at(e.to_string()))?;
+            if std::mem::replace(&mut seen[state.index()], true) {
+                return Err(at(format!("{state} appears twice")));
+            }
+            if let Some(q) = row.q.iter().find(|q| !q.is_finite()) {
+                return Err(at(format!("Q-value {q} of {state} is not finite")));
+            }
+            table.q[state.index()] = row.q;
+            table.visits[state.index()] = row.visits;
         }
-        let _ = ACTION_COUNT;
-        Ok(file)
+        Ok(QTableFile {
+            owner: stored.owner,
+            provenance: stored.provenance,
+            updates: stored.updates,
+            table,
+        })
     }
 
-    /// Writes atomically; the old file stays whole until the new one is complete.
+    /// Writes atomically: the old file stays whole until the new one is complete and synced.
     pub fn save(&self, path: &Path) -> Result<(), QTableError> {
         let bad = |reason: String| QTableError::File {
             path: path.into(),
             reason,
         };
-        let text = serde_json::to_string(self).map_err(|e| bad(e.to_string()))?;
+        let stored = Stored {
+            format: FORMAT.into(),
+            version: VERSION,
+            owner: self.owner.clone(),
+            provenance: self.provenance.clone(),
+            updates: self.updates,
+            states: State::all()
+                .map(|s| StateRow {
+                    level: s.level,
+                    feedback: s.feedback as u8,
+                    previous_score: s.previous_score,
+                    q: self.table.q[s.index()],
+                    visits: self.table.visits[s.index()],
+                })
+                .collect(),
+        };
+        let text = serde_json::to_string_pretty(&stored).map_err(|e| bad(e.to_string()))?;
         let dir = path
             .parent()
             .filter(|d| !d.as_os_str().is_empty())
             .unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir).map_err(|e| bad(e.to_string()))?;
-        let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| bad(e.to_string()))?;
-        std::fs::write(tmp.path(), text).map_err(|e| bad(e.to_string()))?;
-        tmp.as_file().sync_all().map_err(|e| bad(e.to_string()))?;
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))
+        let mut tmp = readable_temp_file(dir).map_err(|e| bad(e.to_string()))?;
+        use std::io::Write;
+        tmp.write_all(text.as_bytes())
+            .and_then(|()| tmp.as_file().sync_all())
             .map_err(|e| bad(e.to_string()))?;
         tmp.persist(path).map_err(|e| bad(e.error.to_string()))?;
         Ok(())
     }
 }
 
+/// A temporary file for an atomic write, readable by all like a normally created file
+/// (tempfile's default 0600 would hide Q-tables and curves from other users' tools).
+pub(crate) fn readable_temp_file(dir: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    let mut builder = tempfile::Builder::new();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    builder.tempfile_in(dir)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn sample() -> QTableFile {
+        let mut table = QTable::default();
+        table.q[5][2] = 1.25;
+        table.q[63][4] = -0.1 / 3.0;
+        table.visits[5] = 17;
+        QTableFile {
+            owner: QTableOwner::Cluster(1),
+            provenance: "test".into(),
+            updates: 3,
+            table,
+        }
+    }
+
     #[test]
-    fn round_trips_and_refuses_broken_files_without_touching_them() {
-        let dir = std::env::temp_dir().join(format!("qtable_{}", std::process::id()));
-        let path = dir.join("cluster_0.json");
-        let mut f = QTableFile::new("cluster 0", "test", QTable::default());
-        f.table.q[5][2] = 1.25;
-        f.save(&path).expect("saves");
-        assert_eq!(QTableFile::load(&path).expect("loads"), f);
+    fn round_trips_exactly() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("cluster_1.json");
+        sample().save(&path).expect("saves");
+        assert_eq!(QTableFile::load(&path).expect("loads"), sample());
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&path)
+                .expect("metadata")
+                .permissions()
+                .mode();
+            assert_eq!(mode & 0o777, 0o644);
+        }
+    }
+
+    #[test]
+    fn broken_files_are_refused_by_name() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("cluster_1.json");
+        sample().save(&path).expect("saves");
         let good = std::fs::read_to_string(&path).expect("read");
-        std::fs::write(&path, &good[..good.len() / 2]).expect("truncate");
-        let e = QTableFile::load(&path).expect_err("truncated");
-        assert!(e.to_string().contains("cluster_0.json"), "{e}");
-        std::fs::write(&path, good.replace("\"version\":1", "\"version\":7")).expect("write");
-        assert!(matches!(
-            QTableFile::load(&path),
-            Err(QTableError::Version { found: 7, .. })
-        ));
-        let _ = std::fs::remove_dir_all(dir);
+        let cases = [
+            (good[..good.len() / 2].to_string(), "not JSON"),
+            (
+                good.replace("\"version\": 1", "\"version\": 7"),
+                "version 7",
+            ),
+            (good.replace(FORMAT, "something else"), "field format"),
+            (good.replacen("\"level\": 1", "\"level\": 4", 1), "states["),
+            (good.replacen("1.25", "\"x\"", 1), "malformed"),
+            (
+                good.replacen("\"visits\": 17", "\"visits\": 17, \"more\": 1", 1),
+                "more",
+            ),
+        ];
+        for (text, words) in cases {
+            std::fs::write(&path, &text).expect("write");
+            let e = QTableFile::load(&path).expect_err(words);
+            let shown = e.to_string();
+            assert!(shown.contains("cluster_1.json"), "{shown}");
+            assert!(shown.contains(words), "{shown} lacks {words:?}");
+            // Loading never writes.
+            assert_eq!(std::fs::read_to_string(&path).expect("read"), text);
+        }
+    }
+
+    #[test]
+    fn owners_name_their_files() {
+        assert_eq!(
+            QTableOwner::Cluster(2).file_name().expect("name"),
+            "cluster_2.json"
+        );
+        assert_eq!(
+            QTableOwner::User("P-07_a".into())
+                .file_name()
+                .expect("name"),
+            "user_P-07_a.json"
+        );
+        for bad in ["", "../etc", "a b", "x/y"] {
+            assert!(QTableOwner::User(bad.into()).file_name().is_err(), "{bad}");
+        }
     }
 }

@@ -1,0 +1,204 @@
+//! `behaviour_policy run`: the decision node over DDS. Answers DecideAction with an explained
+//! Decision (also published), learns from every SequenceResult and saves that cluster's
+//! Q-table at once. All logic is in `PersistentPolicy`/`PolicyCore`; this only moves messages.
+
+use anyhow::Context;
+use behaviour_policy::experiments::{EpochScheme, RunSpec, best_run, train_run};
+use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
+use behaviour_policy::{
+    BehaviourPolicyParams, Decision, Learning, Mode, PersistentPolicy, QTable, QTableOwner,
+    Transition,
+};
+use node_shell::{NodeShell, ShellOptions, header_now};
+use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
+use qt_therapy_msgs::{BehaviourState, DecideActionResponse, SequenceResult};
+use sequence_game::{Action, SEQUENCES_PER_SESSION, State, UserModelTable};
+use std::path::Path;
+
+/// Pretrains a cluster's table when it has no file: the best of `runs` softmax runs.
+fn pretrain(
+    model: &UserModelTable,
+    learning: Learning,
+    params: &BehaviourPolicyParams,
+    cluster: usize,
+) -> anyhow::Result<(QTable, String)> {
+    let (epochs, runs) = params.pretraining()?;
+    let settings = SessionSettings {
+        learning,
+        mode: Mode::Explore,
+        state_lags_result: params.pretrain_state_lags_result,
+    };
+    let spec = RunSpec {
+        epochs,
+        sessions_per_epoch: 100,
+        scheme: EpochScheme::Blocks,
+        state_lags_result: params.pretrain_state_lags_result,
+    };
+    let user = SimulatedUser::new(model, &learning);
+    let all: Vec<_> = (0..runs)
+        .map(|r| {
+            let seed = params.seed() ^ ((cluster as u64) << 32) ^ r as u64;
+            train_run(&user, &settings, QTable::default(), &spec, seed)
+        })
+        .collect();
+    let best = best_run(&all).context("no pretraining run")?;
+    let provenance = format!(
+        "pretrained by the node: best of {runs} runs x {epochs} epochs x 100 sessions (return \
+         {:.3}), reward {}, state lag {}, against {}",
+        all[best].final_return,
+        learning.reward.name(),
+        params.pretrain_state_lags_result,
+        params.user_model_file
+    );
+    Ok((all[best].q_table.clone(), provenance))
+}
+
+fn decision_message(
+    d: &Decision,
+    session_id: &str,
+    p: &PersistentPolicy,
+) -> qt_therapy_msgs::Decision {
+    qt_therapy_msgs::Decision {
+        header: header_now(),
+        session_id: session_id.to_string(),
+        step: d.step,
+        state: BehaviourState::from_state(d.state),
+        action: d.action.index() as u8,
+        level: d.level.get(),
+        feedback: d.feedback as u8,
+        q_values: d.q_values.to_vec(),
+        probabilities: d.probabilities.to_vec(),
+        temperature: d.temperature,
+        explored: d.explored,
+        exploitation_only: d.mode == Mode::Exploit,
+        model_used: format!(
+            "{} ({}, {} updates)",
+            p.owner(),
+            p.path().display(),
+            p.core().updates()
+        ),
+    }
+}
+
+/// The live game's transition: PS of the next state is this sequence's own score.
+fn transition(r: &SequenceResult) -> anyhow::Result<Transition> {
+    let state = r
+        .state
+        .to_state()
+        .map_err(|e| anyhow::anyhow!("state: {}", e.reason))?;
+    let action = Action::new(r.action.into())?;
+    let next_state = State::new(
+        r.level.into(),
+        r.feedback.into(),
+        i64::from(r.level) * i64::from(r.outcome),
+    )?;
+    // No face seen: E is unknown, counted as neutral (0) so only RE speaks.
+    let engagement = if r.engagement_per_second.is_empty() {
+        0.0
+    } else {
+        f64::from(r.engagement)
+    };
+    Ok(Transition {
+        state,
+        action,
+        activity_result: f64::from(r.activity_result),
+        engagement,
+        next_state,
+        is_last: usize::from(r.sequence_index) >= SEQUENCES_PER_SESSION,
+    })
+}
+
+pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
+    let (mut shell, params): (NodeShell, BehaviourPolicyParams) =
+        NodeShell::start("behaviour_policy", &options)?;
+    let learning = params.learning()?;
+    let set =
+        user_model::UserModelSet::load(Path::new(&params.user_model_file)).with_context(|| {
+            format!(
+                "user_model_file in {}",
+                options.params_path(shell.name()).display()
+            )
+        })?;
+    let mut policies = Vec::new();
+    for (k, model) in set.tables().iter().enumerate() {
+        let mut pretrained = None;
+        let (p, how) = PersistentPolicy::open(
+            Path::new(&params.q_table_dir),
+            QTableOwner::Cluster(k),
+            learning,
+            params.mode(),
+            params.seed() ^ k as u64,
+            || {
+                let r = pretrain(model, learning, &params, k);
+                let fallback = (QTable::default(), String::new());
+                match r {
+                    Ok(t) => t,
+                    Err(e) => {
+                        pretrained = Some(e);
+                        fallback
+                    }
+                }
+            },
+        )?;
+        if let Some(e) = pretrained {
+            return Err(e);
+        }
+        tracing::info!(cluster = k, file = %p.path().display(), ?how, "Q-table ready");
+        policies.push(p);
+    }
+    let count = policies.len();
+    let default_cluster = params.default_cluster;
+    let cluster_of = move |c: i32| -> anyhow::Result<usize> {
+        let c = if c < 0 { default_cluster } else { i64::from(c) };
+        usize::try_from(c)
+            .ok()
+            .filter(|k| *k < count)
+            .with_context(|| format!("unknown user model cluster {c}: the policy holds {count}"))
+    };
+    {
+        let mut calls = shell.serve(DECIDE_ACTION, |e| DecideActionResponse {
+            ok: false,
+            error: e.to_string(),
+            ..Default::default()
+        })?;
+        let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
+        let decisions = shell.publisher(DECISION)?;
+        let drops = shell.drops();
+        let stop = shell.shutdown_signal();
+        tokio::pin!(stop);
+        loop {
+            tokio::select! {
+                _ = &mut stop => break,
+                Some(call) = calls.recv() => {
+                    let req = &call.request;
+                    let answer = cluster_of(req.user_model_cluster).and_then(|k| {
+                        let state = req.state.to_state().map_err(|e| anyhow::anyhow!("state: {}", e.reason))?;
+                        let d = policies[k].decide(state, req.step)?;
+                        Ok(decision_message(&d, &req.session_id, &policies[k]))
+                    });
+                    let response = match answer {
+                        Ok(d) => {
+                            decisions.send(d.clone());
+                            DecideActionResponse { ok: true, error: String::new(), decision: d }
+                        }
+                        Err(e) => {
+                            tracing::warn!(session = %req.session_id, "refused a decision: {e:#}");
+                            DecideActionResponse { ok: false, error: format!("{e:#}"), ..Default::default() }
+                        }
+                    };
+                    call.respond(response);
+                }
+                Some(result) = results.recv() => {
+                    let learned = cluster_of(result.user_model_cluster).and_then(|k| {
+                        Ok(policies[k].learn(&transition(&result)?)?)
+                    });
+                    if let Err(e) = learned {
+                        drops.record(SEQUENCE_RESULT.name, &format!("not learned from: {e:#}"));
+                    }
+                }
+            }
+        }
+    }
+    shell.stop().await;
+    Ok(())
+}

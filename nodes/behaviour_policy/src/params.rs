@@ -1,0 +1,213 @@
+//! The node's parameters (`params/behaviour_policy.yaml`, ROS 2 form) and their checks. The
+//! defaults are the authors' constants, so the yaml, this struct and `Learning::default()`
+//! say the same thing (a test holds them together).
+
+use crate::learning::{Learning, Mode, Reward, TemperatureSchedule};
+
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BehaviourPolicyParams {
+    pub user_model_file: String,
+    pub q_table_dir: String,
+    pub pretrain_epochs: i64,
+    pub pretrain_runs: i64,
+    pub pretrain_state_lags_result: bool,
+    pub exploitation_only: bool,
+    pub seed: i64,
+    pub default_cluster: i64,
+    pub reward: String,
+    pub alpha: f64,
+    pub gamma: f64,
+    pub initial_temperature: f64,
+    pub min_temperature: f64,
+    pub temperature_decay: f64,
+    pub beta: f64,
+    pub lambda: f64,
+}
+
+impl Default for BehaviourPolicyParams {
+    fn default() -> Self {
+        let l = Learning::default();
+        BehaviourPolicyParams {
+            user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
+            q_table_dir: "out/q_tables".into(),
+            pretrain_epochs: 100,
+            pretrain_runs: 5,
+            pretrain_state_lags_result: false,
+            exploitation_only: true,
+            seed: 7,
+            default_cluster: 0,
+            reward: Reward::RePlusBetaE.name().into(),
+            alpha: l.alpha,
+            gamma: l.gamma,
+            initial_temperature: l.temperature.initial,
+            min_temperature: l.temperature.minimum,
+            temperature_decay: l.temperature.decay_per_visit,
+            beta: l.beta,
+            lambda: l.lambda,
+        }
+    }
+}
+
+/// A parameter with a value the policy cannot use.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("parameter {key}: {reason}")]
+pub struct ParamError {
+    pub key: &'static str,
+    pub reason: String,
+}
+
+fn check(key: &'static str, ok: bool, reason: impl FnOnce() -> String) -> Result<(), ParamError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ParamError {
+            key,
+            reason: reason(),
+        })
+    }
+}
+
+impl BehaviourPolicyParams {
+    /// The learning constants, checked.
+    pub fn learning(&self) -> Result<Learning, ParamError> {
+        let reward = Reward::parse(&self.reward).ok_or_else(|| ParamError {
+            key: "reward",
+            reason: format!("{:?} is not RE, RE+bE or lE", self.reward),
+        })?;
+        let learning = Learning {
+            alpha: self.alpha,
+            gamma: self.gamma,
+            temperature: TemperatureSchedule {
+                initial: self.initial_temperature,
+                minimum: self.min_temperature,
+                decay_per_visit: self.temperature_decay,
+            },
+            beta: self.beta,
+            lambda: self.lambda,
+            reward,
+        };
+        validate_learning(&learning)?;
+        Ok(learning)
+    }
+
+    pub fn mode(&self) -> Mode {
+        if self.exploitation_only {
+            Mode::Exploit
+        } else {
+            Mode::Explore
+        }
+    }
+
+    pub fn seed(&self) -> u64 {
+        // Negative seeds (YAML integers are signed) are as good as any: keep the bits.
+        self.seed as u64
+    }
+
+    pub fn pretraining(&self) -> Result<(usize, usize), ParamError> {
+        let epochs = usize::try_from(self.pretrain_epochs)
+            .ok()
+            .filter(|e| *e > 0);
+        let runs = usize::try_from(self.pretrain_runs).ok().filter(|r| *r > 0);
+        match (epochs, runs) {
+            (Some(e), Some(r)) => Ok((e, r)),
+            (None, _) => Err(ParamError {
+                key: "pretrain_epochs",
+                reason: format!("{} must be at least 1", self.pretrain_epochs),
+            }),
+            (_, None) => Err(ParamError {
+                key: "pretrain_runs",
+                reason: format!("{} must be at least 1", self.pretrain_runs),
+            }),
+        }
+    }
+}
+
+/// α in (0, 1], γ in [0, 1], temperatures positive and finite, β and λ finite.
+pub fn validate_learning(l: &Learning) -> Result<(), ParamError> {
+    check("alpha", l.alpha > 0.0 && l.alpha <= 1.0, || {
+        format!("{} is outside (0, 1]", l.alpha)
+    })?;
+    check("gamma", (0.0..=1.0).contains(&l.gamma), || {
+        format!("{} is outside [0, 1]", l.gamma)
+    })?;
+    let t = &l.temperature;
+    check(
+        "min_temperature",
+        t.minimum.is_finite() && t.minimum > 0.0,
+        || format!("{} must be positive", t.minimum),
+    )?;
+    check(
+        "initial_temperature",
+        t.initial.is_finite() && t.initial >= t.minimum,
+        || format!("{} must be at least min_temperature", t.initial),
+    )?;
+    check(
+        "temperature_decay",
+        t.decay_per_visit.is_finite() && t.decay_per_visit >= 0.0,
+        || format!("{} must be 0 or more", t.decay_per_visit),
+    )?;
+    check("beta", l.beta.is_finite(), || {
+        format!("{} is not finite", l.beta)
+    })?;
+    check("lambda", l.lambda.is_finite(), || {
+        format!("{} is not finite", l.lambda)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_yaml_file_says_what_default_says() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../params/behaviour_policy.yaml");
+        let from_file: BehaviourPolicyParams =
+            node_shell::params::load_parameters(&path, "behaviour_policy").expect("yaml");
+        assert_eq!(from_file, BehaviourPolicyParams::default());
+        let mut l = from_file.learning().expect("valid");
+        assert_eq!(l.reward, Reward::RePlusBetaE);
+        l.reward = Reward::Re;
+        assert_eq!(l, Learning::default());
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let p = BehaviourPolicyParams {
+            reward: "RE+E".into(),
+            ..Default::default()
+        };
+        assert_eq!(p.learning().expect_err("reward").key, "reward");
+        for (p, key) in [
+            (
+                BehaviourPolicyParams {
+                    alpha: f64::NAN,
+                    ..Default::default()
+                },
+                "alpha",
+            ),
+            (
+                BehaviourPolicyParams {
+                    gamma: 1.5,
+                    ..Default::default()
+                },
+                "gamma",
+            ),
+            (
+                BehaviourPolicyParams {
+                    min_temperature: 0.0,
+                    ..Default::default()
+                },
+                "min_temperature",
+            ),
+        ] {
+            assert_eq!(p.learning().expect_err(key).key, key);
+        }
+        let p = BehaviourPolicyParams {
+            pretrain_runs: 0,
+            ..Default::default()
+        };
+        assert_eq!(p.pretraining().expect_err("runs").key, "pretrain_runs");
+    }
+}

@@ -1,0 +1,206 @@
+//! A live policy bound to its Q-table file: every update is saved at once (temp file + rename),
+//! so a crash mid-session loses nothing already learned. A file that is there but unreadable
+//! is an error, never replaced.
+
+use crate::learning::{Learning, Mode, QTable};
+use crate::policy_core::{Decision, PolicyCore, PolicyError, Transition, Update};
+use crate::q_table_file::{QTableError, QTableFile, QTableOwner};
+use sequence_game::State;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum PersistentError {
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    #[error(transparent)]
+    File(#[from] QTableError),
+    #[error("{path} belongs to {found}, not {expected}")]
+    Owner {
+        path: PathBuf,
+        found: QTableOwner,
+        expected: QTableOwner,
+    },
+    #[error("{path}: learned, but saving failed ({source}); the update is kept in memory")]
+    NotSaved { path: PathBuf, source: QTableError },
+}
+
+/// A `PolicyCore` and the file it lives in.
+#[derive(Debug)]
+pub struct PersistentPolicy {
+    core: PolicyCore,
+    owner: QTableOwner,
+    provenance: String,
+    path: PathBuf,
+}
+
+/// How `open` found the table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Opened {
+    Loaded,
+    Created,
+}
+
+impl PersistentPolicy {
+    /// Loads `dir/<owner file>`; when there is none, builds a table with `initial` (e.g.
+    /// pretraining in simulation), saves it, and uses it.
+    pub fn open(
+        dir: &Path,
+        owner: QTableOwner,
+        learning: Learning,
+        mode: Mode,
+        seed: u64,
+        initial: impl FnOnce() -> (QTable, String),
+    ) -> Result<(PersistentPolicy, Opened), PersistentError> {
+        let path = dir.join(owner.file_name()?);
+        let (file, opened) = if path.exists() {
+            let file = QTableFile::load(&path)?;
+            if file.owner != owner {
+                return Err(PersistentError::Owner {
+                    path,
+                    found: file.owner,
+                    expected: owner,
+                });
+            }
+            (file, Opened::Loaded)
+        } else {
+            let (table, provenance) = initial();
+            let file = QTableFile {
+                owner: owner.clone(),
+                provenance,
+                updates: 0,
+                table,
+            };
+            file.save(&path)?;
+            (file, Opened::Created)
+        };
+        Ok((
+            PersistentPolicy {
+                core: PolicyCore::new(file.table, learning, mode, seed, file.updates),
+                owner,
+                provenance: file.provenance,
+                path,
+            },
+            opened,
+        ))
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn owner(&self) -> &QTableOwner {
+        &self.owner
+    }
+
+    pub fn core(&self) -> &PolicyCore {
+        &self.core
+    }
+
+    pub fn decide(&mut self, state: State, step: u8) -> Result<Decision, PolicyError> {
+        self.core.decide(state, step)
+    }
+
+    /// Learns from one sequence and saves the table before returning.
+    pub fn learn(&mut self, t: &Transition) -> Result<Update, PersistentError> {
+        let update = self.core.learn(t)?;
+        let file = QTableFile {
+            owner: self.owner.clone(),
+            provenance: self.provenance.clone(),
+            updates: self.core.updates(),
+            table: self.core.q_table().clone(),
+        };
+        file.save(&self.path)
+            .map_err(|source| PersistentError::NotSaved {
+                path: self.path.clone(),
+                source,
+            })?;
+        Ok(update)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sequence_game::{Action, Level};
+
+    fn open(dir: &Path) -> Result<(PersistentPolicy, Opened), PersistentError> {
+        PersistentPolicy::open(
+            dir,
+            QTableOwner::Cluster(0),
+            Learning::default(),
+            Mode::Exploit,
+            1,
+            || (QTable::default(), "fresh".into()),
+        )
+    }
+
+    fn transition(step: u8) -> Transition {
+        let level = Level::new(i64::from(step % 3) + 1).expect("level");
+        Transition {
+            state: State::START,
+            action: Action::SetLevel(level),
+            activity_result: f64::from(level.get()),
+            engagement: 0.25,
+            next_state: State::new(level.get().into(), 0, 0).expect("state"),
+            is_last: false,
+        }
+    }
+
+    #[test]
+    fn every_update_is_on_disk_before_learn_returns() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (mut p, how) = open(dir.path()).expect("creates");
+        assert_eq!(how, Opened::Created);
+        for step in 1..=10 {
+            p.learn(&transition(step)).expect("learns");
+            // A crash now would lose nothing: the file already holds this update.
+            let on_disk = QTableFile::load(p.path()).expect("loads");
+            assert_eq!(&on_disk.table, p.core().q_table());
+            assert_eq!(on_disk.updates, u64::from(step));
+        }
+        drop(p);
+        let (p, how) = open(dir.path()).expect("reopens");
+        assert_eq!(how, Opened::Loaded);
+        assert_eq!(p.core().updates(), 10);
+    }
+
+    #[test]
+    fn a_corrupt_or_foreign_file_is_refused_and_left_alone() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("cluster_0.json");
+        std::fs::write(&path, "{\"format\": \"qt_therapy q_table\", \"vers").expect("write");
+        let e = open(dir.path()).expect_err("corrupt");
+        assert!(e.to_string().contains("cluster_0.json"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(&path).expect("read"),
+            "{\"format\": \"qt_therapy q_table\", \"vers"
+        );
+        QTableFile {
+            owner: QTableOwner::Cluster(3),
+            provenance: "elsewhere".into(),
+            updates: 0,
+            table: QTable::default(),
+        }
+        .save(&path)
+        .expect("saves");
+        let e = open(dir.path()).expect_err("foreign");
+        assert!(e.to_string().contains("belongs to cluster 3"), "{e}");
+    }
+
+    #[test]
+    fn a_refused_update_leaves_the_file_as_it_was() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (mut p, _) = open(dir.path()).expect("creates");
+        p.learn(&transition(1)).expect("learns");
+        let before = std::fs::read(p.path()).expect("read");
+        let nan = Transition {
+            engagement: f64::NAN,
+            ..transition(2)
+        };
+        assert!(matches!(
+            p.learn(&nan),
+            Err(PersistentError::Policy(PolicyError::Engagement(_)))
+        ));
+        assert_eq!(std::fs::read(p.path()).expect("read"), before);
+    }
+}
