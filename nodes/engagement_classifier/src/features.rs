@@ -5,42 +5,9 @@
 /// Number of features the classifier takes (paper: E: R^32 -> {-1, 1}).
 pub const FEATURE_COUNT: usize = 32;
 
-/// Canonical feature order of `OpenFaceFeatures.msg`: head pose 6, action-unit presence 18,
-/// gaze 8.
-pub const OPENFACE_FEATURES: [&str; FEATURE_COUNT] = [
-    "pose_Tx",
-    "pose_Ty",
-    "pose_Tz",
-    "pose_Rx",
-    "pose_Ry",
-    "pose_Rz",
-    "AU01_c",
-    "AU02_c",
-    "AU04_c",
-    "AU05_c",
-    "AU06_c",
-    "AU07_c",
-    "AU09_c",
-    "AU10_c",
-    "AU12_c",
-    "AU14_c",
-    "AU15_c",
-    "AU17_c",
-    "AU20_c",
-    "AU23_c",
-    "AU25_c",
-    "AU26_c",
-    "AU28_c",
-    "AU45_c",
-    "gaze_0_x",
-    "gaze_0_y",
-    "gaze_0_z",
-    "gaze_1_x",
-    "gaze_1_y",
-    "gaze_1_z",
-    "gaze_angle_x",
-    "gaze_angle_y",
-];
+/// Canonical feature order of `OpenFaceFeatures.msg` (head pose 6, action-unit presence 18,
+/// gaze 8): the message package's own list, so the two cannot differ.
+pub const OPENFACE_FEATURES: [&str; FEATURE_COUNT] = qt_therapy_msgs::OPENFACE_FEATURES;
 
 /// Prefix the authors' data and models put before each OpenFace name.
 pub const MODEL_NAME_PREFIX: &str = "of_";
