@@ -5,7 +5,6 @@
 use anyhow::Context;
 use engagement_classifier::cross_validation::{Fold, FoldResult, mean_accuracy, run_fold};
 use engagement_classifier::features::{AUTHORS_FEATURE_ORDER, FEATURE_COUNT, model_feature_name};
-use engagement_classifier::table::load_labelled_csv;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -91,16 +90,12 @@ fn export(dir: &Path, fold: &Fold, result: &FoldResult) -> anyhow::Result<()> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut params = super::load_params(args.params.as_deref())?;
-    if let Some(v) = args.neutral_label {
-        params.neutral_label = v;
-    }
-    if let Some(v) = args.decimal_repair {
-        params.decimal_repair = v;
-    }
-    params.validate()?;
-    let (table, report) = load_labelled_csv(&args.data, &params.load_options()?)
-        .with_context(|| format!("loading {}", args.data.display()))?;
+    let (params, table, report) = super::load_training_data(
+        args.params.as_deref(),
+        args.neutral_label,
+        args.decimal_repair,
+        &args.data,
+    )?;
     println!("{}", report.summary());
     let participants = table.participant_ids();
     anyhow::ensure!(

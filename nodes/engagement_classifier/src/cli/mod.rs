@@ -10,6 +10,8 @@ mod train;
 
 use anyhow::Context;
 use engagement_classifier::EngagementClassifierParams;
+use engagement_classifier::repair::CleaningReport;
+use engagement_classifier::table::{FeatureTable, load_labelled_csv};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Subcommand)]
@@ -58,6 +60,27 @@ pub fn load_params(path: Option<&Path>) -> anyhow::Result<EngagementClassifierPa
         .with_context(|| format!("reading parameters {}", path.display()))?;
     tracing::info!("parameters from {}", path.display());
     Ok(params)
+}
+
+/// What `train` and `cross-validate` both start from: the parameters with the command line's
+/// data-policy overrides, validated, and the labelled table read under them.
+pub fn load_training_data(
+    params: Option<&Path>,
+    neutral_label: Option<String>,
+    decimal_repair: Option<String>,
+    data: &Path,
+) -> anyhow::Result<(EngagementClassifierParams, FeatureTable, CleaningReport)> {
+    let mut params = load_params(params)?;
+    if let Some(v) = neutral_label {
+        params.neutral_label = v;
+    }
+    if let Some(v) = decimal_repair {
+        params.decimal_repair = v;
+    }
+    params.validate()?;
+    let (table, report) = load_labelled_csv(data, &params.load_options()?)
+        .with_context(|| format!("loading {}", data.display()))?;
+    Ok((params, table, report))
 }
 
 /// `QT_SHARED_DIR`, else `../shared` beside the workspace.

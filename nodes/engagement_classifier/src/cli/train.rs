@@ -2,7 +2,6 @@
 //! writes it as an XGBoost JSON model (Python xgboost loads it as it is).
 
 use anyhow::Context;
-use engagement_classifier::table::load_labelled_csv;
 use engagement_classifier::train::{to_model_file, train};
 use std::path::PathBuf;
 
@@ -32,16 +31,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut params = super::load_params(args.params.as_deref())?;
-    if let Some(v) = args.neutral_label {
-        params.neutral_label = v;
-    }
-    if let Some(v) = args.decimal_repair {
-        params.decimal_repair = v;
-    }
-    params.validate()?;
-    let (table, report) = load_labelled_csv(&args.data, &params.load_options()?)
-        .with_context(|| format!("loading {}", args.data.display()))?;
+    let (params, table, report) = super::load_training_data(
+        args.params.as_deref(),
+        args.neutral_label,
+        args.decimal_repair,
+        &args.data,
+    )?;
     tracing::info!("{}", report.summary());
     let train_params = params.train_params();
     let bar = super::progress_bar(train_params.n_estimators as u64, "trees");
