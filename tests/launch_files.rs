@@ -1,9 +1,11 @@
 //! The launcher starts and stops real node processes from ROS 2 YAML launch files: a two-node
 //! pair that ends itself, Ctrl-C stopping everything, and a dying node reported (and
-//! respawned when asked). All inside one loopback-only network namespace per test.
+//! respawned when asked). All inside one loopback-only network namespace per test. And every
+//! launch file in launch_scripts/ parses and starts built binaries with parameters they have.
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
-use suite_tests::{json_lines, run_in_loopback_netns, workspace_bin};
+use suite_tests::{json_lines, run_in_loopback_netns, workspace_bin, workspace_root};
 
 fn paths() -> (String, String) {
     (
@@ -136,4 +138,79 @@ fn a_node_marked_respawn_is_restarted() {
         "{context}"
     );
     assert!(stdout.contains("launcher_exit=0"), "{context}");
+}
+
+/// The parameter file a process of a launch file reads: `--params-file`, else the node's own
+/// file in the launch's parameter directory (named after the node, as the node shell does).
+fn params_file_of(program: &str, args: &[&str]) -> PathBuf {
+    if let Some(i) = args.iter().position(|a| *a == "--params-file") {
+        return PathBuf::from(args.get(i + 1).copied().unwrap_or_default());
+    }
+    let binary = Path::new(program)
+        .file_name()
+        .map(|f| f.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let node = match (binary.as_str(), args.first().copied()) {
+        ("bag", Some("record")) => "bag_recorder".to_string(),
+        ("bag", Some("play")) => "bag_player".to_string(),
+        ("therapist", _) => "therapist_console".to_string(),
+        _ => binary,
+    };
+    workspace_root().join("params").join(format!("{node}.yaml"))
+}
+
+#[test]
+fn every_launch_script_starts_built_binaries_with_parameters_they_have() {
+    let launch = workspace_bin("launch");
+    let bin = launch.parent().expect("target dir").display().to_string();
+    let root = workspace_root();
+    let mut scripts: Vec<_> = std::fs::read_dir(root.join("launch_scripts"))
+        .expect("launch_scripts/")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_string_lossy().ends_with(".launch.yaml"))
+        .collect();
+    scripts.sort();
+    assert!(scripts.len() >= 2, "{scripts:?}");
+    for script in scripts {
+        // Printing parses the file and expands every argument (no DDS, nothing starts).
+        let out = std::process::Command::new(&launch)
+            .arg("--print")
+            .arg(&script)
+            .arg(format!("bin:={bin}"))
+            .arg("out:=out/launch-check")
+            .current_dir(&root)
+            .output()
+            .expect("launch --print");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let context = format!(
+            "{}:\n{stdout}\n{}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "{context}");
+        let lines: Vec<&str> = stdout.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert!(!lines.is_empty(), "{context}");
+        for line in lines {
+            let (_, command) = line.split_once(": ").expect("name: command");
+            let words: Vec<&str> = command.split_whitespace().collect();
+            let (program, args) = words.split_first().expect("a program");
+            assert!(
+                Path::new(program).is_file(),
+                "{program} is not built\n{context}"
+            );
+            // Every `--param key:=value` names a key of the node's parameter file (a typo would
+            // stop the node at startup).
+            let params = params_file_of(program, args);
+            let text = std::fs::read_to_string(&params)
+                .unwrap_or_else(|e| panic!("{}: {e}\n{context}", params.display()));
+            for pair in args.windows(2).filter(|w| w[0] == "--param") {
+                let key = pair[1].split(":=").next().unwrap_or_default();
+                assert!(
+                    text.contains(&format!("\n    {key}:")),
+                    "{line}: {key} is not a parameter in {}",
+                    params.display()
+                );
+            }
+        }
+    }
 }

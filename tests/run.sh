@@ -11,6 +11,10 @@ command -v unshare >/dev/null || need_apt+=(util-linux)
 [ -e /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need_apt+=(fonts-dejavu-core)
 command -v chromium >/dev/null || need_apt+=(chromium)
 command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
+# DDS Security test: the keystore script uses openssl; the secured build links OpenSSL.
+command -v openssl >/dev/null || need_apt+=(openssl)
+[ -e /usr/include/openssl/ssl.h ] || need_apt+=(libssl-dev)
+command -v pkg-config >/dev/null || need_apt+=(pkg-config)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "installing: ${need_apt[*]}"
   if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
@@ -19,9 +23,13 @@ fi
 
 cargo build --workspace --bins
 cargo test --workspace
+# The optional DDS Security mode (README, DDS Security): built with its feature, tested apart.
+cargo test -p node_shell --features security --test dds_security
 
 # Bags must be readable by the standard Python readers too.
 if [ -f tests/bags/check_bag.py ]; then
   python3 -m pip install -q -r tests/bags/requirements.txt
   python3 tests/bags/check_bag.py
+  # and the committed sample sessions
+  python3 tests/bags/check_bag.py bags/*.mcap
 fi

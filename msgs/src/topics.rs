@@ -14,6 +14,9 @@ pub enum QosKind {
     Reliable,
     /// Latest state: reliable, transient-local, keep last 1 (late joiners get it).
     State,
+    /// Results a restarted node must still learn from: reliable, transient-local, keep last
+    /// 100, so a respawned subscriber gets the ones published while it was down.
+    Durable,
     /// High-rate sensor data: best effort, volatile, keep last 10.
     Features,
 }
@@ -23,6 +26,7 @@ impl QosKind {
         match self {
             QosKind::Reliable => "reliable, volatile, keep last 100",
             QosKind::State => "reliable, transient-local, keep last 1",
+            QosKind::Durable => "reliable, transient-local, keep last 100",
             QosKind::Features => "best effort, volatile, keep last 10",
         }
     }
@@ -109,7 +113,7 @@ pub const THERAPIST_COMMAND: Topic<TherapistCommand> =
     Topic::new("/qt_therapy/therapist/command", QosKind::Reliable);
 pub const GAME_STATE: Topic<GameState> = Topic::new("/qt_therapy/game/state", QosKind::State);
 pub const SEQUENCE_RESULT: Topic<SequenceResult> =
-    Topic::new("/qt_therapy/game/sequence_result", QosKind::Reliable);
+    Topic::new("/qt_therapy/game/sequence_result", QosKind::Durable);
 pub const TABLET_TASK: Topic<TabletTask> = Topic::new("/qt_therapy/tablet/task", QosKind::State);
 pub const TABLET_ANSWER: Topic<TabletAnswer> =
     Topic::new("/qt_therapy/tablet/answer", QosKind::Reliable);

@@ -12,6 +12,7 @@ fn policies(kind: QosKind) -> (&'static str, &'static str, u32) {
     match kind {
         QosKind::Reliable => ("reliable", "volatile", 100),
         QosKind::State => ("reliable", "transient_local", 1),
+        QosKind::Durable => ("reliable", "transient_local", 100),
         QosKind::Features => ("best_effort", "volatile", 10),
     }
 }
@@ -33,6 +34,7 @@ pub fn offered_qos_yaml(kind: QosKind) -> String {
 pub fn qos_kind_from_yaml(text: &str) -> Option<QosKind> {
     let mut reliability = None;
     let mut durability = None;
+    let mut depth = None;
     for line in text.lines() {
         let line = line.trim().trim_start_matches("- ");
         let Some((key, value)) = line.split_once(':') else {
@@ -42,6 +44,7 @@ pub fn qos_kind_from_yaml(text: &str) -> Option<QosKind> {
         match key.trim() {
             "reliability" if reliability.is_none() => reliability = Some(value),
             "durability" if durability.is_none() => durability = Some(value),
+            "depth" if depth.is_none() => depth = value.parse::<u32>().ok(),
             _ => {}
         }
     }
@@ -51,10 +54,12 @@ pub fn qos_kind_from_yaml(text: &str) -> Option<QosKind> {
         _ => return None,
     };
     let transient = matches!(durability.as_deref(), Some("transient_local" | "1"));
-    Some(match (best_effort, transient) {
-        (true, _) => QosKind::Features,
-        (false, true) => QosKind::State,
-        (false, false) => QosKind::Reliable,
+    // Transient-local with a history deeper than one keeps results, not just the latest state.
+    Some(match (best_effort, transient, depth.unwrap_or(1) > 1) {
+        (true, _, _) => QosKind::Features,
+        (false, true, false) => QosKind::State,
+        (false, true, true) => QosKind::Durable,
+        (false, false, _) => QosKind::Reliable,
     })
 }
 
@@ -64,7 +69,12 @@ mod tests {
 
     #[test]
     fn every_class_reads_back() {
-        for kind in [QosKind::Reliable, QosKind::State, QosKind::Features] {
+        for kind in [
+            QosKind::Reliable,
+            QosKind::State,
+            QosKind::Durable,
+            QosKind::Features,
+        ] {
             assert_eq!(qos_kind_from_yaml(&offered_qos_yaml(kind)), Some(kind));
         }
     }

@@ -1,16 +1,21 @@
 //! `bag record`: taps the suite's topics over DDS and writes every message into one MCAP file
 //! (`<output>.partial` until a clean exit renames it). A chunk is closed and handed to the OS
 //! at least every `flush_interval_s`, so a killed recorder loses at most that much; SIGINT or
-//! SIGTERM drains the queue and writes the summary.
+//! SIGTERM drains the queue and writes the summary. A recorder started on the output of one
+//! that was killed (a launcher's respawn) carries the dead one's `.partial` file over into its
+//! own bag first, so the session stays one bag and nothing already on disk is overwritten.
+//! Transient-local topics hand the new recorder their history again; what it carried over is
+//! not written twice.
 
 use anyhow::{Context as _, bail};
 use bag::params::RecorderParams;
 use bag::qos::offered_qos_yaml;
 use bag::suite::suite_type;
-use bag::{BagWriter, Compression, WriterOptions};
+use bag::{BagReader, BagWriter, Compression, Stamp, WriterOptions, partial_path};
 use node_shell::{NodeShell, ShellOptions};
-use qt_therapy_msgs::topics::{TopicInfo, all_topics};
-use std::path::PathBuf;
+use qt_therapy_msgs::topics::{QosKind, TopicInfo, all_topics};
+use std::collections::{BTreeMap, HashSet};
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::sync::mpsc;
 
@@ -80,6 +85,105 @@ fn writer_options(
     })
 }
 
+/// Moves a dead recorder's `<output>.partial` aside (never overwritten) and reads what it holds
+/// up to its first damage (the chunk cut short by the kill).
+fn take_over_partial(output: &Path) -> anyhow::Result<Option<(PathBuf, BagReader)>> {
+    let partial = partial_path(output);
+    if !partial.exists() {
+        return Ok(None);
+    }
+    let stamp = node_shell::now_nanos();
+    let mut aside = partial.clone().into_os_string();
+    aside.push(format!(".crashed-{stamp}"));
+    let aside = PathBuf::from(aside);
+    std::fs::rename(&partial, &aside).with_context(|| {
+        format!(
+            "moving the unfinished {} of a recorder that died aside",
+            partial.display()
+        )
+    })?;
+    let reader = BagReader::open(&aside)
+        .with_context(|| format!("reading {} (a recorder that died)", aside.display()))?;
+    if let Some(e) = reader.damage() {
+        tracing::warn!(bag = %aside.display(), "carrying over what precedes the damage: {e}");
+    }
+    Ok(Some((aside, reader)))
+}
+
+/// A message as its publisher sent it: channel, source time and bytes.
+type SentKey = (u16, u64, Vec<u8>);
+
+/// Writes every message of `old` into `writer`, on the channel of the same topic (added when
+/// `channels` lacks it), with its original times and sequence numbers. Returns how many, and
+/// the keys of those on transient-local channels, which DDS will deliver again.
+fn carry_over(
+    old: &BagReader,
+    writer: &mut BagWriter<std::io::BufWriter<std::fs::File>>,
+    channels: &mut BTreeMap<String, u16>,
+) -> anyhow::Result<(usize, HashSet<SentKey>)> {
+    let mut ids = BTreeMap::new();
+    for c in old.channels() {
+        let id = match channels.get(&c.topic) {
+            Some(id) => *id,
+            None => {
+                let schema = c.schema.as_ref().map(|s| String::from_utf8_lossy(&s.data));
+                let qos = c.metadata.get("offered_qos_profiles").cloned();
+                let id = writer.add_channel(
+                    &c.topic,
+                    c.type_name(),
+                    schema.as_deref().unwrap_or(""),
+                    qos.as_deref().unwrap_or(""),
+                )?;
+                channels.insert(c.topic.clone(), id);
+                id
+            }
+        };
+        ids.insert(c.id, id);
+    }
+    let redelivered: HashSet<u16> = old
+        .channels()
+        .filter(|c| matches!(c.offered_qos(), Some(QosKind::State | QosKind::Durable)))
+        .filter_map(|c| ids.get(&c.id).copied())
+        .collect();
+    let mut n = 0;
+    let mut sent = HashSet::new();
+    for m in old.raw_messages() {
+        let Some(id) = ids.get(&m.channel_id) else {
+            continue;
+        };
+        let stamp = Stamp {
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+            sequence: m.sequence,
+        };
+        writer.write_cdr(*id, stamp, &m.data)?;
+        if redelivered.contains(id) {
+            sent.insert((*id, m.publish_time, m.data.clone()));
+        }
+        n += 1;
+    }
+    Ok((n, sent))
+}
+
+/// Writes a tapped sample unless it is one carried over from a dead recorder.
+fn write_sample(
+    writer: &mut BagWriter<std::io::BufWriter<std::fs::File>>,
+    carried: &mut HashSet<SentKey>,
+    sample: bag::suite::Sample,
+) -> anyhow::Result<()> {
+    if !carried.is_empty()
+        && carried.remove(&(
+            sample.channel_id,
+            sample.stamp.publish_time,
+            sample.payload.clone(),
+        ))
+    {
+        return Ok(());
+    }
+    writer.write_cdr(sample.channel_id, sample.stamp, &sample.payload)?;
+    Ok(())
+}
+
 pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
     let (mut shell, params): (NodeShell, RecorderParams) =
         NodeShell::start("bag_recorder", &args.shell)?;
@@ -102,10 +206,12 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
         bail!("{} exists; record to a new name", args.output.display());
     }
     let options = writer_options(&params, args.compression)?;
+    let taken_over = take_over_partial(&args.output)?;
     let mut writer = BagWriter::create(&args.output, &options)?;
     let capacity = usize::try_from(params.queue_capacity.max(1)).unwrap_or(4096);
     let (tx, mut rx) = mpsc::channel(capacity);
     let mut taps = Vec::new();
+    let mut channels = BTreeMap::new();
     for t in &topics {
         let Some(ty) = suite_type(&t.type_name) else {
             bail!(
@@ -120,9 +226,20 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
             &t.schema_text,
             &offered_qos_yaml(t.qos),
         )?;
+        channels.insert(t.name.to_string(), id);
         taps.push(ty.tap(&mut shell, t.name, t.qos, id, tx.clone())?);
     }
     drop(tx);
+    let mut carried = HashSet::new();
+    if let Some((aside, old)) = &taken_over {
+        let (n, sent) = carry_over(old, &mut writer, &mut channels)?;
+        carried = sent;
+        tracing::warn!(
+            from = %aside.display(),
+            messages = n,
+            "a recorder died on this output: carried its messages over"
+        );
+    }
     // Schemas and channels reach the disk at once, so even an empty recording is readable.
     writer.flush_chunk()?;
     tracing::info!(
@@ -141,14 +258,14 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
             _ = flush.tick() => {
                 // What the readers queued before the tick belongs in this flush.
                 while let Ok(sample) = rx.try_recv() {
-                    writer.write_cdr(sample.channel_id, sample.stamp, &sample.payload)?;
+                    write_sample(&mut writer, &mut carried, sample)?;
                 }
                 writer.flush_chunk()?;
                 progress.set_message(format!("{} messages", writer.message_count()));
                 progress.tick();
             }
             Some(sample) = rx.recv() => {
-                writer.write_cdr(sample.channel_id, sample.stamp, &sample.payload)?;
+                write_sample(&mut writer, &mut carried, sample)?;
             }
         }
     }
@@ -157,7 +274,7 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
     }
     // What the readers already queued is part of the session.
     while let Ok(sample) = rx.try_recv() {
-        writer.write_cdr(sample.channel_id, sample.stamp, &sample.payload)?;
+        write_sample(&mut writer, &mut carried, sample)?;
     }
     for t in taps {
         let _ = t.await;
@@ -168,6 +285,12 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
         .finish()
         .with_context(|| format!("finishing {}", args.output.display()))?;
     tracing::info!(output = %args.output.display(), messages, "bag written");
+    // Its messages are now in the finished bag.
+    if let Some((aside, _)) = taken_over
+        && let Err(e) = std::fs::remove_file(&aside)
+    {
+        tracing::warn!(file = %aside.display(), "could not remove: {e}");
+    }
     println!(
         "{}",
         serde_json::json!({"event": "recorded", "output": args.output, "messages": messages})

@@ -2,7 +2,8 @@
 //! loopback-only network namespace (tests/loopback-netns): a bag written in-process is played
 //! into a recorder and comes back with the same message contents and timing; a second pass
 //! plays it 4x faster, filtered, remapped and from an offset; a third recorder is killed with
-//! SIGKILL mid-session and its file still holds everything but the last second.
+//! SIGKILL mid-session and its file still holds everything but the last second; a recorder
+//! respawned on the same output carries that file over and finishes one whole bag.
 
 mod common;
 
@@ -10,46 +11,11 @@ use bag::{BagReader, Compression, RawMessage, WriterOptions, partial_path};
 use qt_therapy_msgs::Heartbeat;
 use qt_therapy_msgs::topics::{HEARTBEAT, OPENFACE_FEATURES, ROBOT_EMOTION, ROBOT_SPEECH};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::path::PathBuf;
+use std::time::Duration;
 
 fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Runs `script` with bash inside one fresh loopback-only network namespace; None (after
-/// saying why) where this machine cannot make one.
-fn in_loopback_netns(script: &str, deadline: Duration) -> Option<std::process::Output> {
-    let can = ["-n", "-rn"].iter().any(|flag| {
-        Command::new("unshare")
-            .args([flag, "true"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success())
-    });
-    if !can {
-        eprintln!("skipping: this machine cannot create a network namespace");
-        return None;
-    }
-    let mut child = Command::new(workspace().join("tests/loopback-netns"))
-        .args(["timeout", "--signal=KILL", &deadline.as_secs().to_string()])
-        .args(["bash", "-c", script])
-        .current_dir(workspace())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("starting tests/loopback-netns");
-    let started = Instant::now();
-    while child.try_wait().ok().flatten().is_none() {
-        if started.elapsed() > deadline + Duration::from_secs(10) {
-            let _ = child.kill();
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    Some(child.wait_with_output().expect("namespace output"))
+    loopback_netns::workspace_root()
 }
 
 /// Payloads per topic, leaving out the heartbeats of the bag tools themselves.
@@ -108,8 +74,12 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
         $B play $D/session.mcap --loop >$D/play3.out 2>$D/play3.err & P=$!
         for i in $(seq 300); do grep -q playing $D/play3.err && break; sleep 0.1; done
         sleep 4; K=$(date +%s%N); kill -KILL $R; wait $R
+        cp $D/rec3.mcap.partial $D/rec3-killed.mcap.partial
+        $B record -o $D/rec3.mcap --all >$D/rec3b.out 2>$D/rec3b.err & R=$!
+        sleep 3; B0=$(date +%s%N); sleep 2
+        kill -INT $R; wait $R; R3=$?
         kill -INT $P; wait $P; P3=$?
-        echo "{{\"p1\":$P1,\"r1\":$R1,\"p2\":$P2,\"r2\":$R2,\"p3\":$P3,\"killed_ns\":$K}}"
+        echo "{{\"p1\":$P1,\"r1\":$R1,\"p2\":$P2,\"r2\":$R2,\"p3\":$P3,\"r3\":$R3,\"killed_ns\":$K,\"back_ns\":$B0}}"
         "#,
         bin = env!("CARGO_BIN_EXE_bag"),
         d = d.display(),
@@ -117,12 +87,12 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
         emotion = ROBOT_EMOTION.name,
         features = OPENFACE_FEATURES.name,
     );
-    let Some(out) = in_loopback_netns(&script, Duration::from_secs(240)) else {
+    let Some(out) = loopback_netns::run_in_loopback_netns(&script, Duration::from_secs(240)) else {
         return;
     };
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
     let context = format!(
-        "stdout: {}\nstderr: {}\nplay1: {}{}\nrec1: {}{}\nplay2: {}\nrec2: {}\nplay3: {}\nrec3: {}",
+        "stdout: {}\nstderr: {}\nplay1: {}{}\nrec1: {}{}\nplay2: {}\nrec2: {}\nplay3: {}\nrec3: {}\nrec3b: {}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr),
         read("play1.out"),
@@ -133,12 +103,13 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
         read("rec2.err"),
         read("play3.err"),
         read("rec3.err"),
+        read("rec3b.err"),
     );
     let status: serde_json::Value = String::from_utf8_lossy(&out.stdout)
         .lines()
         .find_map(|l| serde_json::from_str(l).ok())
         .unwrap_or_else(|| panic!("no status line\n{context}"));
-    for key in ["p1", "r1", "p2", "r2", "p3"] {
+    for key in ["p1", "r1", "p2", "r2", "p3", "r3"] {
         assert_eq!(status[key], 0, "{key}\n{context}");
     }
     let played: serde_json::Value = serde_json::from_str(read("play1.out").trim()).expect("json");
@@ -202,7 +173,7 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
 
     // 3. Killed: the .partial file is readable and holds what was logged up to a second (plus
     // scheduling slack) before the kill.
-    let rec3 = BagReader::open(&partial_path(&d.join("rec3.mcap"))).expect("rec3 partial");
+    let rec3 = BagReader::open(&partial_path(&d.join("rec3-killed.mcap"))).expect("rec3 partial");
     assert!(!rec3.is_complete());
     if let Some(e) = rec3.damage() {
         assert!(matches!(e, bag::BagError::Truncated { .. }), "{e}");
@@ -223,6 +194,74 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
     assert!(
         rec3.raw_messages().len() > 100,
         "{}",
+        rec3.raw_messages().len()
+    );
+
+    // 4. Respawned on the same output: one finished bag that holds every message the killed
+    // recorder had on disk (same times, sequence numbers and bytes) and what came after; the
+    // dead recorder's file was moved aside, carried over, and removed once the bag was whole.
+    let whole = BagReader::open(&d.join("rec3.mcap"))
+        .expect("rec3 after the respawn")
+        .strict()
+        .expect("undamaged");
+    assert!(whole.is_complete(), "{context}");
+    let key = |r: &BagReader, m: &RawMessage| {
+        let topic = r.channel(m.channel_id).map(|c| c.topic.clone());
+        (
+            topic,
+            m.log_time,
+            m.publish_time,
+            m.sequence,
+            m.data.clone(),
+        )
+    };
+    let kept: std::collections::BTreeSet<_> = whole
+        .raw_messages()
+        .iter()
+        .map(|m| key(&whole, m))
+        .collect();
+    let missing = rec3
+        .raw_messages()
+        .iter()
+        .filter(|m| !kept.contains(&key(&rec3, m)))
+        .count();
+    assert_eq!(
+        missing, 0,
+        "messages of the killed recorder not carried over\n{context}"
+    );
+    // Transient-local topics delivered their history to the new recorder again: kept once.
+    let mut once = std::collections::BTreeSet::new();
+    let twice = whole
+        .raw_messages()
+        .iter()
+        .filter(|m| {
+            whole
+                .channel(m.channel_id)
+                .and_then(|c| c.offered_qos())
+                .is_some_and(|q| q != qt_therapy_msgs::topics::QosKind::Features)
+        })
+        .filter(|m| !once.insert((m.channel_id, m.publish_time, m.data.clone())))
+        .count();
+    assert_eq!(twice, 0, "messages recorded twice\n{context}");
+    let back_ns = status["back_ns"].as_u64().expect("back time");
+    let after = whole
+        .raw_messages()
+        .iter()
+        .filter(|m| m.log_time > back_ns)
+        .count();
+    assert!(
+        after > 10,
+        "{after} messages recorded after the respawn\n{context}"
+    );
+    let leftovers: Vec<_> = std::fs::read_dir(d)
+        .expect("dir")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("rec3.mcap.partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    eprintln!(
+        "respawned recorder: {} messages carried over, {after} recorded in the last 2 s, one bag",
         rec3.raw_messages().len()
     );
 }

@@ -8,6 +8,7 @@
 pub mod experiments;
 pub mod grid;
 pub mod learning;
+pub mod messages;
 pub mod params;
 pub mod persistent;
 pub mod plot;

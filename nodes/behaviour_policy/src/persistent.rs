@@ -1,11 +1,13 @@
 //! A live policy bound to its Q-table file: every update is saved at once (temp file + rename),
 //! so a crash mid-session loses nothing already learned. A file that is there but unreadable
-//! is an error, never replaced.
+//! is an error, never replaced. The file also remembers which sequences were learned from, so
+//! results sent again to a respawned policy are learned exactly once.
 
 use crate::learning::{Learning, Mode, QTable};
 use crate::policy_core::{Decision, PolicyCore, PolicyError, Transition, Update};
 use crate::q_table_file::{QTableError, QTableFile, QTableOwner};
 use sequence_game::State;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
@@ -30,6 +32,7 @@ pub struct PersistentPolicy {
     core: PolicyCore,
     owner: QTableOwner,
     provenance: String,
+    learned: BTreeMap<String, u8>,
     path: PathBuf,
 }
 
@@ -68,6 +71,7 @@ impl PersistentPolicy {
                 owner: owner.clone(),
                 provenance,
                 updates: 0,
+                learned: BTreeMap::new(),
                 table,
             };
             file.save(&path)?;
@@ -78,6 +82,7 @@ impl PersistentPolicy {
                 core: PolicyCore::new(file.table, learning, mode, seed, file.updates),
                 owner,
                 provenance: file.provenance,
+                learned: file.learned,
                 path,
             },
             opened,
@@ -103,18 +108,49 @@ impl PersistentPolicy {
     /// Learns from one sequence and saves the table before returning.
     pub fn learn(&mut self, t: &Transition) -> Result<Update, PersistentError> {
         let update = self.core.learn(t)?;
+        self.save()?;
+        Ok(update)
+    }
+
+    /// Learns from sequence `sequence_index` of `session_id` unless it already has (None):
+    /// the results topic is replayed to a policy that restarts mid-session.
+    pub fn learn_sequence(
+        &mut self,
+        session_id: &str,
+        sequence_index: u8,
+        t: &Transition,
+    ) -> Result<Option<Update>, PersistentError> {
+        if self
+            .learned
+            .get(session_id)
+            .is_some_and(|last| sequence_index <= *last)
+        {
+            return Ok(None);
+        }
+        let update = self.core.learn(t)?;
+        self.learned.insert(session_id.to_string(), sequence_index);
+        self.save()?;
+        Ok(Some(update))
+    }
+
+    /// The highest sequence index of `session_id` learned from, if any.
+    pub fn last_learned(&self, session_id: &str) -> Option<u8> {
+        self.learned.get(session_id).copied()
+    }
+
+    fn save(&self) -> Result<(), PersistentError> {
         let file = QTableFile {
             owner: self.owner.clone(),
             provenance: self.provenance.clone(),
             updates: self.core.updates(),
+            learned: self.learned.clone(),
             table: self.core.q_table().clone(),
         };
         file.save(&self.path)
             .map_err(|source| PersistentError::NotSaved {
                 path: self.path.clone(),
                 source,
-            })?;
-        Ok(update)
+            })
     }
 }
 
@@ -165,6 +201,49 @@ mod tests {
     }
 
     #[test]
+    fn a_sequence_sent_again_after_a_restart_is_learned_once() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (mut p, _) = open(dir.path()).expect("creates");
+        for step in 1..=3 {
+            assert!(
+                p.learn_sequence("s1", step, &transition(step))
+                    .expect("learns")
+                    .is_some()
+            );
+        }
+        let before = p.core().q_table().clone();
+        drop(p);
+        // Respawned: the results topic hands it sequences 1..5 of s1 again, and s2 is new.
+        let (mut p, _) = open(dir.path()).expect("reopens");
+        assert_eq!(p.last_learned("s1"), Some(3));
+        for step in 1..=3 {
+            assert!(
+                p.learn_sequence("s1", step, &transition(step))
+                    .expect("ok")
+                    .is_none()
+            );
+        }
+        assert_eq!(p.core().q_table(), &before);
+        assert_eq!(p.core().updates(), 3);
+        for step in 4..=5 {
+            assert!(
+                p.learn_sequence("s1", step, &transition(step))
+                    .expect("learns")
+                    .is_some()
+            );
+        }
+        assert!(
+            p.learn_sequence("s2", 1, &transition(1))
+                .expect("learns")
+                .is_some()
+        );
+        assert_eq!(p.core().updates(), 6);
+        let on_disk = QTableFile::load(p.path()).expect("loads");
+        assert_eq!(on_disk.learned.get("s1"), Some(&5));
+        assert_eq!(on_disk.learned.get("s2"), Some(&1));
+    }
+
+    #[test]
     fn a_corrupt_or_foreign_file_is_refused_and_left_alone() {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("cluster_0.json");
@@ -179,6 +258,7 @@ mod tests {
             owner: QTableOwner::Cluster(3),
             provenance: "elsewhere".into(),
             updates: 0,
+            learned: BTreeMap::new(),
             table: QTable::default(),
         }
         .save(&path)

@@ -5,6 +5,7 @@
 use crate::learning::QTable;
 use sequence_game::{ACTION_COUNT, STATE_COUNT, State};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pub const FORMAT: &str = "qt_therapy q_table";
@@ -83,6 +84,9 @@ struct Stored {
     owner: QTableOwner,
     provenance: String,
     updates: u64,
+    /// Absent in files written before it existed: nothing learned live yet.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    learned: BTreeMap<String, u8>,
     states: Vec<StateRow>,
 }
 
@@ -94,11 +98,23 @@ pub struct QTableFile {
     pub provenance: String,
     /// Updates applied since it was created.
     pub updates: u64,
+    /// Per session, the highest sequence index learned from: a respawned policy is sent the
+    /// results again (transient-local) and must learn each only once.
+    pub learned: BTreeMap<String, u8>,
     pub table: QTable,
 }
 
 impl QTableFile {
     pub fn load(path: &Path) -> Result<QTableFile, QTableError> {
+        let text = std::fs::read_to_string(path).map_err(|e| QTableError::File {
+            path: path.into(),
+            reason: e.to_string(),
+        })?;
+        QTableFile::from_json_str(&text, path)
+    }
+
+    /// As [`QTableFile::load`], from the file's text (`path` only names it in errors).
+    pub fn from_json_str(text: &str, path: &Path) -> Result<QTableFile, QTableError> {
         let bad = |reason: String| QTableError::File {
             path: path.into(),
             reason,
@@ -108,9 +124,8 @@ impl QTableFile {
             field,
             reason,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
         let value: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| bad(format!("not JSON (truncated?): {e}")))?;
+            serde_json::from_str(text).map_err(|e| bad(format!("not JSON (truncated?): {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(field(
                 "format".into(),
@@ -158,6 +173,7 @@ impl QTableFile {
             owner: stored.owner,
             provenance: stored.provenance,
             updates: stored.updates,
+            learned: stored.learned,
             table,
         })
     }
@@ -174,6 +190,7 @@ impl QTableFile {
             owner: self.owner.clone(),
             provenance: self.provenance.clone(),
             updates: self.updates,
+            learned: self.learned.clone(),
             states: State::all()
                 .map(|s| StateRow {
                     level: s.level,
@@ -225,6 +242,7 @@ mod tests {
             owner: QTableOwner::Cluster(1),
             provenance: "test".into(),
             updates: 3,
+            learned: BTreeMap::from([("session-1".to_string(), 4)]),
             table,
         }
     }

@@ -7,6 +7,7 @@ pub mod aggregate;
 pub mod cross_validation;
 pub mod estimator;
 pub mod features;
+pub mod messages;
 pub mod model;
 pub mod params;
 pub mod plot;

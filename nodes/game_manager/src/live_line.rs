@@ -38,8 +38,22 @@ pub fn decision_reason(d: &Decision) -> String {
     }
 }
 
+/// The reason as a listener who saw the result and (maybe) the decision before it tells it:
+/// the therapist's override, the policy's choice, or else the game's safe fallback (same
+/// level, no feedback), which is what a sequence without a decision was played with.
+pub fn reason_from_messages(r: &SequenceResult, decision: Option<&Decision>) -> String {
+    if r.overridden {
+        "therapist override".into()
+    } else if let Some(d) = decision {
+        decision_reason(d)
+    } else {
+        "safe fallback (no decision from the policy)".into()
+    }
+}
+
 /// One line per scored sequence: level, feedback, answer, score, engagement, reason.
-pub fn sequence_line(r: &SequenceResult, planned: u8, reason: &str) -> String {
+/// `planned` (the session's sequence count) is shown when known.
+pub fn sequence_line(r: &SequenceResult, planned: Option<u8>, reason: &str) -> String {
     let answer = if r.timed_out {
         "timeout"
     } else if r.outcome == 1 {
@@ -56,8 +70,9 @@ pub fn sequence_line(r: &SequenceResult, planned: u8, reason: &str) -> String {
             r.engagement_per_second.len()
         )
     };
+    let planned = planned.map(|n| format!("/{n}")).unwrap_or_default();
     format!(
-        "seq {:>2}/{planned}  level {} ({} emotions)  feedback {:<11}  answer {:<7}  score {:+}  {engagement}  | {reason}",
+        "seq {:>2}{planned}  level {} ({} emotions)  feedback {:<11}  answer {:<7}  score {:+}  {engagement}  | {reason}",
         r.sequence_index,
         r.level,
         2 * u16::from(r.level) + 1,
@@ -90,7 +105,7 @@ mod tests {
         let greedy = decision_reason(&Decision {
             explored: false,
             action: 1,
-            ..d
+            ..d.clone()
         });
         assert!(
             greedy.starts_with("policy greedy: level 2 (Q=0.90"),
@@ -105,7 +120,7 @@ mod tests {
             engagement_per_second: vec![0.25; 14],
             ..Default::default()
         };
-        let line = sequence_line(&r, 10, &reason);
+        let line = sequence_line(&r, Some(10), &reason);
         assert!(
             line.starts_with("seq  3/10  level 2 (5 emotions)  feedback encouraging"),
             "{line}"
@@ -119,6 +134,13 @@ mod tests {
             engagement_per_second: vec![],
             ..r
         };
-        assert!(sequence_line(&t, 10, "x").contains("answer timeout  score -2  E  n/a"));
+        assert!(sequence_line(&t, Some(10), "x").contains("answer timeout  score -2  E  n/a"));
+        assert!(sequence_line(&t, None, "x").starts_with("seq  3  level 2"));
+        assert!(reason_from_messages(&t, None).starts_with("safe fallback"));
+        let o = SequenceResult {
+            overridden: true,
+            ..t
+        };
+        assert_eq!(reason_from_messages(&o, Some(&d)), "therapist override");
     }
 }

@@ -1,5 +1,5 @@
 //! `game_manager run`: the game manager node. Moves messages between DDS and the sans-IO core
-//! (`GameManager`): therapist commands, tablet answers and engagement in; robot speech, faces,
+//! (`GameManager`): therapist commands, tablet answers, engagement and heartbeats in; robot speech, faces,
 //! gestures, tablet tasks, game states and results out; DecideAction calls with a deadline;
 //! the core's timers; session files; one live line per sequence on stdout.
 //!   game_manager run [--sessions-dir DIR] [--params-file params/game_manager.yaml]
@@ -11,8 +11,8 @@ use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
 use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{
-    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH,
-    SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
+    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,
+    ROBOT_SPEECH, SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
 };
 use qt_therapy_msgs::{DecideAction, GameState, SequenceResult, TabletTask};
 use std::collections::BTreeSet;
@@ -81,6 +81,8 @@ async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result
     let mut commands = shell.subscribe(THERAPIST_COMMAND, 64)?;
     let mut answers = shell.subscribe(TABLET_ANSWER, 64)?;
     let mut engagement = shell.subscribe(EXPECTED_ENGAGEMENT, 256)?;
+    // Every node's 10 Hz heartbeat; the core watches those named in watched_nodes.
+    let mut heartbeats = shell.subscribe(HEARTBEAT, 256)?;
     let policy = shell.client(DECIDE_ACTION)?;
     let (decided_tx, mut decided) = mpsc::channel::<Input>(16);
     // (due time, timer id) of the timers the core asked for.
@@ -121,7 +123,10 @@ async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result
         let wait = next_timer.map_or(Duration::from_secs(3600), |at| {
             Duration::from_nanos(u64::try_from(at - now_nanos()).unwrap_or(0))
         });
+        // Biased: a message already here is handled before a due timer it may make moot (a
+        // heartbeat queued while the loop was busy must not let the watchdog see a loss).
         let input = tokio::select! {
+            biased;
             _ = &mut stop => {
                 let outputs = core.handle(Input::Shutdown { reason: "node shut down (signal)".into() }, now_nanos());
                 ctx.apply(outputs);
@@ -130,6 +135,7 @@ async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result
             Some(c) = commands.recv() => Input::Command(c),
             Some(a) = answers.recv() => Input::Answer(a),
             Some(e) = engagement.recv() => Input::Engagement(e),
+            Some(h) = heartbeats.recv() => Input::Heartbeat(h),
             Some(d) = decided.recv() => d,
             _ = tokio::time::sleep(wait), if next_timer.is_some() => {
                 match ctx.timers.pop_first() {

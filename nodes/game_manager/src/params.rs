@@ -62,6 +62,16 @@ pub struct GameManagerParams {
     pub well_done_emotion: String,
     pub try_again_emotion: String,
     pub goodbye_gesture: String,
+    /// Nodes whose heartbeat the game manager watches (their `NodeShell` names). A node
+    /// silent for longer than `node_loss_timeout_s` is lost: the robot goes silent and the
+    /// session is held (paused, not lost) until it is back. Empty: watch nothing.
+    pub watched_nodes: Vec<String>,
+    /// Seconds without a heartbeat after which a watched node is lost (real time: not
+    /// multiplied by `time_scale`).
+    pub node_loss_timeout_s: f64,
+    /// True: a session held for a lost node resumes by itself when every watched node is back.
+    /// False: it stays paused until the therapist's resume.
+    pub auto_resume_after_node_loss: bool,
 }
 
 fn strings(v: &[&str]) -> Vec<String> {
@@ -125,6 +135,14 @@ impl Default for GameManagerParams {
             well_done_emotion: "QT/happy".into(),
             try_again_emotion: "QT/showing_smile".into(),
             goodbye_gesture: "QT/bye".into(),
+            watched_nodes: strings(&[
+                "behaviour_policy",
+                "engagement_classifier",
+                "tablet_bridge",
+                "bag_recorder",
+            ]),
+            node_loss_timeout_s: 4.0,
+            auto_resume_after_node_loss: true,
         }
     }
 }
@@ -232,6 +250,18 @@ impl GameManagerParams {
                 return bad(key, "needs 4 words: happy, disgusted, sad, angry");
             }
         }
+        seconds("node_loss_timeout_s", self.node_loss_timeout_s, 0.2, 600.0)?;
+        for (i, name) in self.watched_nodes.iter().enumerate() {
+            if name.trim().is_empty() || name == "game_manager" {
+                return bad(
+                    "watched_nodes",
+                    format!("{name:?} is not a node the game manager can watch"),
+                );
+            }
+            if self.watched_nodes[..i].contains(name) {
+                return bad("watched_nodes", format!("{name:?} is listed twice"));
+            }
+        }
         Ok(())
     }
 
@@ -316,6 +346,27 @@ mod tests {
                     ..Default::default()
                 },
                 "policy_deadline_s",
+            ),
+            (
+                GameManagerParams {
+                    node_loss_timeout_s: 0.0,
+                    ..Default::default()
+                },
+                "node_loss_timeout_s",
+            ),
+            (
+                GameManagerParams {
+                    watched_nodes: strings(&["behaviour_policy", "behaviour_policy"]),
+                    ..Default::default()
+                },
+                "watched_nodes",
+            ),
+            (
+                GameManagerParams {
+                    watched_nodes: strings(&["game_manager"]),
+                    ..Default::default()
+                },
+                "watched_nodes",
             ),
         ];
         for (p, key) in cases {

@@ -1,11 +1,12 @@
-//! What goes into and comes out of the game manager's core: messages, service answers and
-//! timer firings in; robot acts, tablet tasks, game states, results, service requests, timer
-//! requests, session-file records and log lines out. Time is message time in nanoseconds.
+//! What goes into and comes out of the game manager's core: messages (heartbeats among them),
+//! service answers and timer firings in; robot acts, tablet tasks, game states, results,
+//! service requests, timer requests, session-file records and log lines out. Time is message
+//! time in nanoseconds.
 
 use crate::session_file::{SequenceRecord, SessionSummary};
 use qt_therapy_msgs::{
-    DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState, SequenceResult,
-    TabletAnswer, TabletTask, TherapistCommand,
+    DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState, Heartbeat,
+    SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
 };
 
 /// One event for the core.
@@ -24,6 +25,8 @@ pub enum Input {
     },
     /// The call for `request_id` failed (no server, transport error, the caller's deadline).
     DecisionFailed { request_id: u64, reason: String },
+    /// A node's heartbeat, at its arrival time (the core watches `watched_nodes`).
+    Heartbeat(Heartbeat),
     /// A timer the core asked for with [`Output::SetTimer`] is due.
     TimerFired { id: u64 },
     /// The node is going down: save the session.

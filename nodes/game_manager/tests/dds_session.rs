@@ -4,52 +4,10 @@
 //! ten fsync'd records and a summary in the session directory, results over DDS.
 
 use game_manager::session_file::{SessionSummary, read_records};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::path::Path;
+use std::time::Duration;
 
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn can_make_network_namespace() -> bool {
-    let ok = |args: &[&str]| {
-        Command::new("unshare")
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    ok(&["-n", "true"]) || ok(&["-rn", "true"])
-}
-
-/// Runs `script` with bash in a fresh loopback-only network namespace, killed after `deadline`.
-fn run_in_namespace(script: &str, deadline: Duration) -> std::process::Output {
-    let mut child = Command::new(workspace_root().join("tests/loopback-netns"))
-        .args([
-            "timeout",
-            "--signal=KILL",
-            &deadline.as_secs().to_string(),
-            "bash",
-            "-c",
-            script,
-        ])
-        .current_dir(workspace_root())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("starting tests/loopback-netns");
-    let started = Instant::now();
-    while child.try_wait().ok().flatten().is_none() {
-        if started.elapsed() > deadline + Duration::from_secs(10) {
-            let _ = child.kill();
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    child.wait_with_output().expect("namespace output")
-}
+use loopback_netns::{run_in_loopback_netns, workspace_root};
 
 /// The shipped parameters, twenty times faster, and a parameter file for the peer, in `d`.
 fn write_params(d: &Path) {
@@ -57,8 +15,13 @@ fn write_params(d: &Path) {
         .expect("params/game_manager.yaml");
     let fast = shipped
         .replace("time_scale: 1.0", "time_scale: 0.05")
-        .replace("engagement_wait_s: 1.5", "engagement_wait_s: 1.2");
-    assert_ne!(fast, shipped);
+        .replace("engagement_wait_s: 1.5", "engagement_wait_s: 1.2")
+        // The peer stands in for the policy, tablets and camera: it is the node to watch.
+        .replace(
+            r#"watched_nodes: ["behaviour_policy", "engagement_classifier", "tablet_bridge", "bag_recorder"]"#,
+            r#"watched_nodes: ["game_manager_test_peer"]"#,
+        );
+    assert!(fast.contains("game_manager_test_peer"));
     std::fs::write(d.join("game_manager.yaml"), fast).expect("write params");
     std::fs::write(
         d.join("game_manager_test_peer.yaml"),
@@ -75,10 +38,6 @@ fn json_lines(text: &str) -> Vec<serde_json::Value> {
 
 #[test]
 fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
-    if !can_make_network_namespace() {
-        eprintln!("skipping: this machine cannot create a network namespace");
-        return;
-    }
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     write_params(d);
@@ -96,7 +55,9 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
         gm = env!("CARGO_BIN_EXE_game_manager"),
         peer = env!("CARGO_BIN_EXE_game_manager_test_peer"),
     );
-    let out = run_in_namespace(&script, Duration::from_secs(200));
+    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(200)) else {
+        return;
+    };
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
     let (gm_out, peer_out) = (read("gm.out"), read("peer.out"));
     let context = format!(
@@ -183,10 +144,6 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
 
 #[test]
 fn a_killed_node_loses_no_scored_sequence_and_a_stopped_one_writes_its_summary() {
-    if !can_make_network_namespace() {
-        eprintln!("skipping: this machine cannot create a network namespace");
-        return;
-    }
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     write_params(d);
@@ -209,7 +166,9 @@ fn a_killed_node_loses_no_scored_sequence_and_a_stopped_one_writes_its_summary()
         gm = env!("CARGO_BIN_EXE_game_manager"),
         peer = env!("CARGO_BIN_EXE_game_manager_test_peer"),
     );
-    let out = run_in_namespace(&script, Duration::from_secs(120));
+    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(120)) else {
+        return;
+    };
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
     let context = format!(
         "script: {}\n{}\ngm1: {}\ngm2: {}\n{}",

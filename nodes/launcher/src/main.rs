@@ -1,7 +1,7 @@
 //! `launch`: starts the suite's node processes from a ROS 2 YAML launch file in
 //! `launch_scripts/`, e.g. `launch launch_scripts/session.launch.yaml seed:=7`.
 
-mod description;
+use launcher::description;
 mod supervisor;
 
 use anyhow::Context;

@@ -7,6 +7,7 @@
 pub mod drops;
 pub mod logging;
 pub mod params;
+pub mod security;
 mod shell;
 pub mod tap;
 

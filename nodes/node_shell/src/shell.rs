@@ -6,6 +6,7 @@
 use crate::drops::DropLog;
 use crate::logging::init_logging;
 use crate::params::{apply_overrides, parameters_from_map, read_parameter_map};
+use crate::security::{SecurityError, SecurityMode};
 use anyhow::{Context as _, bail};
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::{HEARTBEAT, QosKind, Service, Topic};
@@ -40,9 +41,20 @@ pub struct ShellOptions {
     /// Override one parameter of the file, as ROS 2's `-p`: `--param time_scale:=0.2`.
     #[arg(long = "param", value_name = "KEY:=VALUE")]
     pub param_overrides: Vec<String>,
+    /// SROS2 enclave of this node, e.g. /qt_therapy/tablet_bridge (used when
+    /// ROS_SECURITY_ENABLE=true; ROS_SECURITY_ENCLAVE_OVERRIDE wins over it, as in rcl).
+    /// Always accepted, so launch files need no per-build variant; a build without the
+    /// `security` feature refuses to start when security is enabled.
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 impl ShellOptions {
+    /// The `--enclave` argument.
+    pub fn enclave_arg(&self) -> Option<&str> {
+        self.enclave.as_deref()
+    }
+
     /// The parameter file this node reads.
     pub fn params_path(&self, node_name: &str) -> PathBuf {
         if let Some(p) = &self.params_file {
@@ -88,6 +100,10 @@ pub fn qos_profile(kind: QosKind) -> QosProfile {
             .reliability(reliable)
             .durability(Durability::TransientLocal)
             .history(History::KeepLast { depth: 1 }),
+        QosKind::Durable => QosProfile::publisher_default()
+            .reliability(reliable)
+            .durability(Durability::TransientLocal)
+            .history(History::KeepLast { depth: 100 }),
         QosKind::Features => QosProfile::subscription_default()
             .reliability(Reliability::BestEffort)
             .durability(Durability::Volatile)
@@ -150,9 +166,29 @@ impl NodeShell {
         if localhost {
             builder = builder.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
         }
-        let participant = builder
-            .build()
-            .with_context(|| format!("creating the DDS participant in domain {domain}"))?;
+        let enclave = match SecurityMode::from_env(options.enclave_arg())
+            .context("reading the DDS security settings")?
+        {
+            SecurityMode::Off => None,
+            _ if !cfg!(feature = "security") => return Err(SecurityError::NotBuilt.into()),
+            SecurityMode::PermissiveFallback { reason } => {
+                tracing::warn!(
+                    "ROS_SECURITY_ENABLE=true, strategy Permissive: running WITHOUT DDS \
+                     security because {reason}"
+                );
+                None
+            }
+            SecurityMode::Enclave { enclave, dir } => {
+                builder = with_security(builder, &dir)?;
+                Some(enclave)
+            }
+        };
+        let participant = builder.build().with_context(|| match &enclave {
+            Some(e) => {
+                format!("creating the secured DDS participant (enclave {e}) in domain {domain}")
+            }
+            None => format!("creating the DDS participant in domain {domain}"),
+        })?;
         let context = Context::from_domain_participant(participant)
             .context("creating the ros2-client context")?;
         let node_name = NodeName::new(&options.namespace, &name).map_err(|e| {
@@ -176,6 +212,7 @@ impl NodeShell {
             node = %name,
             domain,
             localhost_only = localhost,
+            enclave = enclave.as_deref().unwrap_or("none (DDS security off)"),
             params = %params_path.display(),
             "node started"
         );
@@ -400,6 +437,29 @@ impl NodeShell {
         }
         tracing::info!(node = %self.name, "node stopped");
     }
+}
+
+/// Turns on RustDDS's builtin authentication, access control and cryptography with the
+/// enclave's files. SROS2 keys carry no password.
+#[cfg(feature = "security")]
+fn with_security(
+    builder: rustdds::DomainParticipantBuilder,
+    enclave_dir: &std::path::Path,
+) -> anyhow::Result<rustdds::DomainParticipantBuilder> {
+    Ok(builder.builtin_security(
+        rustdds::DomainParticipantSecurityConfigFiles::with_ros_default_names(
+            enclave_dir,
+            String::new(),
+        ),
+    ))
+}
+
+#[cfg(not(feature = "security"))]
+fn with_security(
+    _builder: rustdds::DomainParticipantBuilder,
+    _enclave_dir: &std::path::Path,
+) -> anyhow::Result<rustdds::DomainParticipantBuilder> {
+    Err(SecurityError::NotBuilt.into())
 }
 
 fn spawn_signal_listener() -> anyhow::Result<watch::Receiver<bool>> {

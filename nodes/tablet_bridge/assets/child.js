@@ -20,6 +20,8 @@ function render() {
   const paused = phase === "paused";
   const answering = mode === "answering" && !paused;
   document.body.className = "child " + (paused ? "paused" : mode);
+  // Which task is on screen, for whoever checks the page (the browser test).
+  document.body.dataset.sequence = task ? String(task.sequence_id) : "";
   let prompt = "listen";
   if (paused) prompt = "paused";
   else if (mode === "answering") prompt = "your_turn";

@@ -135,6 +135,9 @@ function addResult(r) {
   row.dataset.session = r.session_id;
   const outcome = r.timed_out ? "timeout" : r.outcome === 1 ? "right" : "wrong";
   row.className = "result " + outcome;
+  // The paper's score of a sequence is L * O (a timeout is a wrong answer).
+  row.dataset.score = r.outcome === 1 ? r.level : -r.level;
+  row.dataset.level = r.level;
   cell(row, r.sequence_index);
   cell(row, r.level + (r.overridden ? " *" : ""));
   // What the robot said above what the child tapped, face under face.
@@ -146,6 +149,17 @@ function addResult(r) {
   cell(row, fmt(r.engagement, 2));
   cell(row, fmt(r.response_time, 1));
   body.prepend(row);
+  showTotal();
+}
+
+// The session's score so far, sum of L * O, against its maximum, sum of L.
+function showTotal() {
+  let score = 0, max = 0;
+  for (const row of $("results").tBodies[0].rows) {
+    score += Number(row.dataset.score);
+    max += Number(row.dataset.level);
+  }
+  $("g-total").textContent = score + " / " + max;
 }
 
 function drawTrend() {

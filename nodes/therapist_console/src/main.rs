@@ -5,11 +5,11 @@
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
+use game_manager::live_line::{reason_from_messages, sequence_line};
 use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
 use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND};
 use qt_therapy_msgs::{Decision, GameState, TherapistCommand};
 use std::time::Duration;
-use therapist_console::sequence_line;
 
 #[derive(Parser)]
 #[command(about = "Send therapist commands to the game manager and follow a session")]
@@ -28,9 +28,13 @@ enum Command {
     RunSession {
         #[command(flatten)]
         start: StartArgs,
-        /// Give up after this many seconds.
+        /// Give up after this many seconds (per session).
         #[arg(long, default_value_t = 1800)]
         timeout: u64,
+        /// Run this many sessions back to back from this one console (ids <session>-00001,
+        /// -00002, ...); stops at the first that does not finish.
+        #[arg(long, default_value_t = 1)]
+        sessions: u32,
     },
     Pause(SessionArg),
     Resume(SessionArg),
@@ -87,27 +91,42 @@ async fn main() -> anyhow::Result<()> {
         let mut decisions = shell.subscribe(DECISION, 64)?;
         match cli.command {
             Command::Start(a) => {
-                let c = start_command(&a, &mut states).await?;
+                let c = start_command(&a, Some(&mut states)).await?;
                 send(&commands, &shell, c).await?;
                 0
             }
-            Command::RunSession { start, timeout } => {
-                let c = start_command(&start, &mut states).await?;
-                let session = c.session_id.clone();
-                send(&commands, &shell, c).await?;
-                println!(
-                    "session {session} started for user {} (cluster {})",
-                    start.user, start.cluster
-                );
-                follow(
-                    &session,
-                    &mut states,
-                    &mut results,
-                    &mut decisions,
-                    Duration::from_secs(timeout),
-                    &shell,
-                )
-                .await?
+            Command::RunSession {
+                start,
+                timeout,
+                sessions,
+            } => {
+                let mut code = 0;
+                for k in 1..=sessions {
+                    let check = (k == 1).then_some(&mut states);
+                    let mut c = start_command(&start, check).await?;
+                    if sessions > 1 {
+                        c.session_id = format!("{}-{k:05}", c.session_id);
+                    }
+                    let session = c.session_id.clone();
+                    send(&commands, &shell, c).await?;
+                    println!(
+                        "session {session} started for user {} (cluster {})",
+                        start.user, start.cluster
+                    );
+                    code = follow(
+                        &session,
+                        &mut states,
+                        &mut results,
+                        &mut decisions,
+                        Duration::from_secs(timeout),
+                        &shell,
+                    )
+                    .await?;
+                    if code != 0 {
+                        break;
+                    }
+                }
+                code
             }
             Command::Pause(s) => {
                 send(
@@ -168,10 +187,30 @@ async fn send(
     Ok(0)
 }
 
+/// The START command, once the game manager is free. `states` None: it is known to be (the
+/// session this console followed just finished).
 async fn start_command(
     a: &StartArgs,
-    states: &mut tokio::sync::mpsc::Receiver<GameState>,
+    states: Option<&mut tokio::sync::mpsc::Receiver<GameState>>,
 ) -> anyhow::Result<TherapistCommand> {
+    if let Some(states) = states {
+        check_free(a, states).await?;
+    }
+    let session = a
+        .session
+        .clone()
+        .unwrap_or_else(|| format!("session-{}", now_nanos() / 1_000_000_000));
+    let mut c = command(TherapistCommand::START, &session);
+    c.user_id = a.user.clone();
+    c.user_model_cluster = a.cluster;
+    Ok(c)
+}
+
+/// Fails when no game manager answers or it is busy with a session.
+async fn check_free(
+    a: &StartArgs,
+    states: &mut tokio::sync::mpsc::Receiver<GameState>,
+) -> anyhow::Result<()> {
     // The game state is transient-local: a running game manager's last state arrives at once.
     let state = tokio::time::timeout(Duration::from_secs(a.wait), states.recv())
         .await
@@ -182,6 +221,18 @@ async fn start_command(
             )
         })?
         .context("game state channel closed")?;
+    // RustDDS hands a new transient-local reader every sample its writer still keeps for a
+    // reader that has not acknowledged it yet (e.g. the console of the session before, just
+    // gone), oldest first: the game's state now is the newest that arrives in a short while.
+    let mut state = state;
+    let settle = tokio::time::Instant::now() + Duration::from_millis(500);
+    while let Ok(Some(s)) = tokio::time::timeout_at(settle, states.recv()).await {
+        if (s.header.stamp.sec, s.header.stamp.nanosec)
+            >= (state.header.stamp.sec, state.header.stamp.nanosec)
+        {
+            state = s;
+        }
+    }
     if !matches!(
         state.phase,
         GameState::IDLE | GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
@@ -192,14 +243,7 @@ async fn start_command(
             state.phase
         );
     }
-    let session = a
-        .session
-        .clone()
-        .unwrap_or_else(|| format!("session-{}", now_nanos() / 1_000_000_000));
-    let mut c = command(TherapistCommand::START, &session);
-    c.user_id = a.user.clone();
-    c.user_model_cluster = a.cluster;
-    Ok(c)
+    Ok(())
 }
 
 async fn follow(
@@ -224,7 +268,7 @@ async fn follow(
             Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
             Some(r) = results.recv() => if r.session_id == session {
                 let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                println!("{}", sequence_line(&r, d));
+                println!("{}", sequence_line(&r, None, &reason_from_messages(&r, d)));
                 results_seen += 1;
             },
             Some(s) = states.recv() => {
@@ -234,7 +278,24 @@ async fn follow(
                     last_status = s.status.clone();
                 }
                 match s.phase {
-                    GameState::FINISHED => { println!("session {session} finished: {results_seen} sequences"); return Ok(0); }
+                    GameState::FINISHED => {
+                        // Results travel on their own topic: the last one may arrive just
+                        // after the state that ends the session.
+                        let grace = tokio::time::Instant::now() + Duration::from_secs(2);
+                        while results_seen < usize::from(s.sequence_index) {
+                            match tokio::time::timeout_at(grace, results.recv()).await {
+                                Ok(Some(r)) if r.session_id == session => {
+                                    let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
+                                    println!("{}", sequence_line(&r, None, &reason_from_messages(&r, d)));
+                                    results_seen += 1;
+                                }
+                                Ok(Some(_)) => {}
+                                _ => break,
+                            }
+                        }
+                        println!("session {session} finished: {results_seen} sequences");
+                        return Ok(0);
+                    }
                     GameState::STOPPED | GameState::EMERGENCY_STOPPED => {
                         println!("session {session} {}", phase_name(s.phase));
                         return Ok(3);

@@ -17,7 +17,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Fit user models from interaction data (a study directory or our CSV).
+    /// Fit user models from interaction data (a study directory, our CSV, or session bags).
     Fit(commands::fit::Args),
     /// Print F^p and F^e (mean, std) of every cluster and input of a model file as CSV.
     Predict(commands::predict::Args),

@@ -248,7 +248,15 @@ fn length(field: String, found: usize, expected: usize) -> Result<(), Problem> {
 
 impl GpComponent {
     /// Checks the stored shape and values; `width` is the encoded input width.
-    fn check(&self, field: &str, width: usize, range: (f64, f64)) -> Result<(), Problem> {
+    /// `max_rows` is the number of distinct groups: refitting is cubic in the rows, so a
+    /// file with more would only make loading hang (fuzz/regressions/user_model_file).
+    fn check(
+        &self,
+        field: &str,
+        width: usize,
+        max_rows: usize,
+        range: (f64, f64),
+    ) -> Result<(), Problem> {
         self.kernel
             .validate()
             .map_err(|e| (format!("{field}.kernel"), e.to_string()))?;
@@ -277,6 +285,15 @@ impl GpComponent {
         }
         if self.inputs.is_empty() {
             return Err((format!("{field}.inputs"), "is empty".into()));
+        }
+        if self.inputs.len() > max_rows {
+            return Err((
+                format!("{field}.inputs"),
+                format!(
+                    "has {} rows; a model has at most one per input group ({max_rows})",
+                    self.inputs.len()
+                ),
+            ));
         }
         length(
             format!("{field}.targets"),
@@ -320,6 +337,7 @@ impl UserModelFile {
             length(format!("centres[{i}]"), c.len(), 2)?;
             finite_all(format!("centres[{i}]"), c)?;
         }
+        let groups = ModelInput::all().count();
         for (i, c) in self.clusters.iter().enumerate() {
             if c.cluster != i {
                 return Err((
@@ -333,11 +351,13 @@ impl UserModelFile {
             c.success.check(
                 &format!("clusters[{i}].success"),
                 SUCCESS_INPUT_WIDTH,
+                groups,
                 (0.0, 1.0),
             )?;
             c.engagement.check(
                 &format!("clusters[{i}].engagement"),
                 SUCCESS_INPUT_WIDTH + 1,
+                groups * Outcome::ALL.len(),
                 (-1.0, 1.0),
             )?;
         }
@@ -420,6 +440,15 @@ impl UserModelSet {
 
     /// Reads and checks a model file, naming the field at fault.
     pub fn load(path: &Path) -> Result<UserModelSet, UserModelError> {
+        let text = std::fs::read_to_string(path).map_err(|e| UserModelError::File {
+            path: path.into(),
+            reason: e.to_string(),
+        })?;
+        UserModelSet::from_json_str(&text, path)
+    }
+
+    /// As [`UserModelSet::load`], from the file's text (`path` only names it in errors).
+    pub fn from_json_str(text: &str, path: &Path) -> Result<UserModelSet, UserModelError> {
         let bad = |reason: String| UserModelError::File {
             path: path.into(),
             reason,
@@ -429,8 +458,7 @@ impl UserModelSet {
             field,
             reason,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-        let value: serde_json::Value = serde_json::from_str(&text)
+        let value: serde_json::Value = serde_json::from_str(text)
             .map_err(|e| bad(format!("not valid JSON (truncated?): {e}")))?;
         if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
             return Err(field((

@@ -1,8 +1,12 @@
 //! Bad input is refused with an error naming the record or field, and nothing is written
 //! half-way: too few users for c clusters, a cluster of one user, NaN or out-of-range values,
-//! a truncated or wrong-version model file.
+//! a truncated or wrong-version model file; a truncated session bag (the sequences before the
+//! damage, and a warning naming the record), a bag without the topics the records need.
 
-use user_model::data::{InteractionRecord, write_csv};
+mod common;
+
+use user_model::data::bag::read_bag;
+use user_model::data::{DataError, InteractionRecord, read_any, write_csv};
 use user_model::simulate::{StudySpec, simulate_study};
 use user_model::{FitOptions, UserModelError, UserModelSet, fit};
 
@@ -219,4 +223,90 @@ fn saving_replaces_the_whole_file_or_nothing() {
         UserModelSet::load(&path).expect("loads").tables(),
         other.tables()
     );
+}
+
+#[test]
+fn a_truncated_bag_gives_the_sequences_before_the_damage_and_names_the_record() {
+    let records = common::at_bag_precision(&study());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("session.mcap");
+    // Small chunks, so a cut loses only the end.
+    let options = bag::WriterOptions {
+        chunk_size: 8 * 1024,
+        ..Default::default()
+    };
+    common::write_bag_with(&path, &records, &options);
+    let whole = read_bag(&path).expect("reads the whole bag");
+    assert_eq!((whole.records.len(), whole.warnings.len()), (200, 0));
+    let bytes = std::fs::read(&path).expect("reads");
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).expect("writes");
+    let read = read_bag(&cut).expect("reads what precedes the damage");
+    let n = read.records.len();
+    assert!(n > 50 && n < 200, "{n} records");
+    // Exactly the first n sequences (written in time order), each whole.
+    assert_eq!(read.records, records[..n]);
+    assert_eq!(read.warnings.len(), 1, "{:?}", read.warnings);
+    let w = &read.warnings[0];
+    assert!(
+        w.contains("cut.mcap is damaged")
+            && w.contains(&format!("the {n} sequence results before the damage"))
+            && w.contains("record #")
+            && w.contains("truncated"),
+        "{w}"
+    );
+    // Cut inside the first chunk: nothing to learn from, said clearly.
+    std::fs::write(&cut, &bytes[..200]).expect("writes");
+    let e = read_bag(&cut).expect_err("nothing left").to_string();
+    assert!(e.contains("cut.mcap: no topic"), "{e}");
+    std::fs::write(&cut, b"not a bag at all").expect("writes");
+    let e = read_any(&cut).expect_err("not MCAP").to_string();
+    assert!(e.contains("cut.mcap: not an MCAP file"), "{e}");
+}
+
+#[test]
+fn a_bag_without_the_needed_topics_is_named() {
+    use qt_therapy_msgs::topics::{GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_TASK};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("heartbeats.mcap");
+    let mut w = bag::BagWriter::create(&path, &bag::WriterOptions::default()).expect("creates");
+    let beat = w.add_topic(HEARTBEAT).expect("topic");
+    w.write(beat, 1, &qt_therapy_msgs::Heartbeat::default())
+        .expect("writes");
+    w.finish().expect("finishes");
+    let e = read_bag(&path).expect_err("no results");
+    assert!(matches!(e, DataError::MissingTopic { .. }), "{e}");
+    assert!(
+        e.to_string().contains(
+            "heartbeats.mcap: no topic \"/qt_therapy/game/sequence_result\" in the bag, which user-model data needs"
+        ),
+        "{e}"
+    );
+    // Results without the engagement topic: named too.
+    let records = common::at_bag_precision(&study()[..10]);
+    let full = dir.path().join("full.mcap");
+    common::write_bag(&full, &records);
+    let reader = bag::BagReader::open(&full).expect("opens");
+    let path = dir.path().join("no_engagement.mcap");
+    let mut w = bag::BagWriter::create(&path, &bag::WriterOptions::default()).expect("creates");
+    let states = w.add_topic(GAME_STATE).expect("topic");
+    let results = w.add_topic(SEQUENCE_RESULT).expect("topic");
+    let tasks = w.add_topic(TABLET_TASK).expect("topic");
+    for m in reader.topic(GAME_STATE).expect("states") {
+        w.write(states, m.log_time, &m.message).expect("writes");
+    }
+    for m in reader.topic(TABLET_TASK).expect("tasks") {
+        w.write(tasks, m.log_time, &m.message).expect("writes");
+    }
+    for m in reader.topic(SEQUENCE_RESULT).expect("results") {
+        w.write(results, m.log_time, &m.message).expect("writes");
+    }
+    w.finish().expect("finishes");
+    let e = read_bag(&path).expect_err("no engagement").to_string();
+    assert!(
+        e.contains("no topic \"/qt_therapy/engagement/expected\"")
+            && e.contains("per-second engagement"),
+        "{e}"
+    );
+    assert_eq!(read_bag(&full).expect("reads").records, records);
 }

@@ -108,3 +108,25 @@ fn new_users_go_to_the_nearest_cluster() {
             .is_err()
     );
 }
+
+#[test]
+fn a_file_with_more_training_rows_than_input_groups_is_refused_before_refitting() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/synthetic_study_c2.json");
+    let text = std::fs::read_to_string(&path).expect("reads");
+    let mut value: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    // Refitting is cubic in the rows: a few thousand would hang the loading node.
+    let success = &mut value["clusters"][0]["success"];
+    let row = success["inputs"][0].clone();
+    let target = success["targets"][0].clone();
+    let groups = ModelInput::all().count();
+    success["inputs"] = serde_json::Value::Array(vec![row; groups + 1]);
+    success["targets"] = serde_json::Value::Array(vec![target; groups + 1]);
+    let e = UserModelSet::from_json_str(&value.to_string(), &path)
+        .expect_err("too many rows")
+        .to_string();
+    assert!(
+        e.contains("field clusters[0].success.inputs") && e.contains("at most one per"),
+        "{e}"
+    );
+    UserModelSet::from_json_str(&text, &path).expect("the shipped model loads");
+}

@@ -1,6 +1,8 @@
 //! The real MigrAVE study (beside the repository in ../shared): read directly, it fits into the
 //! paper's two clusters of 11 and 9 users with the authors' per-cluster numbers, and the
 //! committed model file is what `user_model fit` makes of it. Skips where ../shared is absent.
+//! Also the recorded sample sessions in bags/ (skipped where there are none): the bag reader's
+//! records carry the per-second engagement the game manager computed live.
 
 use std::path::{Path, PathBuf};
 use user_model::{FitOptions, UserModelSet, fit};
@@ -98,4 +100,57 @@ fn committed_model_is_what_fit_makes_of_the_study() {
     fresh.provenance = model.file().provenance.clone();
     assert_eq!(&fresh, model.file());
     assert_eq!(set.tables(), model.tables());
+}
+
+#[test]
+fn recorded_session_bags_give_the_game_managers_engagement() {
+    use qt_therapy_msgs::SequenceResult;
+    use qt_therapy_msgs::topics::SEQUENCE_RESULT;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bags");
+    let bags = if dir.is_dir() {
+        user_model::data::bag::bags_in(&dir).expect("lists bags/")
+    } else {
+        vec![]
+    };
+    if bags.is_empty() {
+        eprintln!("skipping: no recorded session bag in bags/");
+        return;
+    }
+    for path in &bags {
+        let read = user_model::data::bag::read_bag(path).expect("reads the bag");
+        assert!(read.warnings.is_empty(), "{:?}", read.warnings);
+        let results = bag::BagReader::open(path)
+            .expect("opens")
+            .messages::<SequenceResult>(SEQUENCE_RESULT.name)
+            .expect("results");
+        assert_eq!(read.records.len(), results.len(), "{}", path.display());
+        for m in &results {
+            let m = &m.message;
+            let r = read
+                .records
+                .iter()
+                .filter(|r| r.session_id == m.session_id)
+                .nth(usize::from(m.sequence_index) - 1)
+                .expect("the sequence's record");
+            let game: Vec<f64> = m
+                .engagement_per_second
+                .iter()
+                .map(|v| f64::from(*v))
+                .collect();
+            assert_eq!(
+                (
+                    r.engagement_per_second.clone(),
+                    r.user_id.as_str(),
+                    r.level.get(),
+                    u8::from(r.feedback)
+                ),
+                (game, m.user_id.as_str(), m.level, m.feedback),
+                "{} sequence {}",
+                path.display(),
+                m.sequence_index
+            );
+            assert_eq!(r.previous_score, m.state.previous_score);
+            assert_eq!(r.outcome.sign(), m.outcome);
+        }
+    }
 }

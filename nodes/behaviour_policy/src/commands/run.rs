@@ -1,18 +1,19 @@
 //! `behaviour_policy run`: the decision node over DDS. Answers DecideAction with an explained
 //! Decision (also published), learns from every SequenceResult and saves that cluster's
-//! Q-table at once. All logic is in `PersistentPolicy`/`PolicyCore`; this only moves messages.
+//! Q-table at once. All logic is in `PersistentPolicy`/`PolicyCore`, the conversion of messages in
+//! `behaviour_policy::messages`; this only moves them.
 
 use anyhow::Context;
 use behaviour_policy::experiments::{EpochScheme, RunSpec, best_run, train_run};
+use behaviour_policy::messages::{decision_message, transition};
 use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
 use behaviour_policy::{
-    BehaviourPolicyParams, Decision, Learning, Mode, PersistentPolicy, QTable, QTableOwner,
-    Transition,
+    BehaviourPolicyParams, Learning, Mode, PersistentPolicy, QTable, QTableOwner,
 };
 use node_shell::{NodeShell, ShellOptions, header_now};
+use qt_therapy_msgs::DecideActionResponse;
 use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
-use qt_therapy_msgs::{BehaviourState, DecideActionResponse, SequenceResult};
-use sequence_game::{Action, SEQUENCES_PER_SESSION, State, UserModelTable};
+use sequence_game::UserModelTable;
 use std::path::Path;
 
 /// Pretrains a cluster's table when it has no file: the best of `runs` softmax runs.
@@ -53,59 +54,14 @@ fn pretrain(
     Ok((all[best].q_table.clone(), provenance))
 }
 
-fn decision_message(
-    d: &Decision,
-    session_id: &str,
-    p: &PersistentPolicy,
-) -> qt_therapy_msgs::Decision {
-    qt_therapy_msgs::Decision {
-        header: header_now(),
-        session_id: session_id.to_string(),
-        step: d.step,
-        state: BehaviourState::from_state(d.state),
-        action: d.action.index() as u8,
-        level: d.level.get(),
-        feedback: d.feedback as u8,
-        q_values: d.q_values.to_vec(),
-        probabilities: d.probabilities.to_vec(),
-        temperature: d.temperature,
-        explored: d.explored,
-        exploitation_only: d.mode == Mode::Exploit,
-        model_used: format!(
-            "{} ({}, {} updates)",
-            p.owner(),
-            p.path().display(),
-            p.core().updates()
-        ),
-    }
-}
-
-/// The live game's transition: PS of the next state is this sequence's own score.
-fn transition(r: &SequenceResult) -> anyhow::Result<Transition> {
-    let state = r
-        .state
-        .to_state()
-        .map_err(|e| anyhow::anyhow!("state: {}", e.reason))?;
-    let action = Action::new(r.action.into())?;
-    let next_state = State::new(
-        r.level.into(),
-        r.feedback.into(),
-        i64::from(r.level) * i64::from(r.outcome),
-    )?;
-    // No face seen: E is unknown, counted as neutral (0) so only RE speaks.
-    let engagement = if r.engagement_per_second.is_empty() {
-        0.0
-    } else {
-        f64::from(r.engagement)
-    };
-    Ok(Transition {
-        state,
-        action,
-        activity_result: f64::from(r.activity_result),
-        engagement,
-        next_state,
-        is_last: usize::from(r.sequence_index) >= SEQUENCES_PER_SESSION,
-    })
+/// Which Q-table made a decision, for the Decision message.
+fn model_used(p: &PersistentPolicy) -> String {
+    format!(
+        "{} ({}, {} updates)",
+        p.owner(),
+        p.path().display(),
+        p.core().updates()
+    )
 }
 
 pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
@@ -174,7 +130,7 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
                     let answer = cluster_of(req.user_model_cluster).and_then(|k| {
                         let state = req.state.to_state().map_err(|e| anyhow::anyhow!("state: {}", e.reason))?;
                         let d = policies[k].decide(state, req.step)?;
-                        Ok(decision_message(&d, &req.session_id, &policies[k]))
+                        Ok(decision_message(&d, header_now(), &req.session_id, model_used(&policies[k])))
                     });
                     let response = match answer {
                         Ok(d) => {
@@ -190,7 +146,16 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
                 }
                 Some(result) = results.recv() => {
                     let learned = cluster_of(result.user_model_cluster).and_then(|k| {
-                        Ok(policies[k].learn(&transition(&result)?)?)
+                        let learned = policies[k].learn_sequence(
+                            &result.session_id,
+                            result.sequence_index,
+                            &transition(&result)?,
+                        )?;
+                        if learned.is_none() {
+                            tracing::info!(session = %result.session_id, sequence = result.sequence_index,
+                                "already learned from this sequence (sent again after a restart)");
+                        }
+                        Ok(())
                     });
                     if let Err(e) = learned {
                         drops.record(SEQUENCE_RESULT.name, &format!("not learned from: {e:#}"));

@@ -161,6 +161,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         owner,
         provenance: provenance.clone(),
         updates: 0,
+        learned: Default::default(),
         table: runs[best].q_table.clone(),
     }
     .save(&output)?;

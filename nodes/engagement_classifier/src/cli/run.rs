@@ -1,18 +1,15 @@
 //! `engagement_classifier run`: the DDS node. OpenFace frames in; per frame an
 //! `EngagementEstimate`, per second of message time and source an `ExpectedEngagement` out.
-//! All logic is in `EngagementEstimator`; this only converts messages.
+//! All logic is in `EngagementEstimator`; the conversion of messages is `messages::Sources`.
 
 use anyhow::Context;
+use engagement_classifier::messages::Sources;
 use engagement_classifier::{
-    EngagementClassifierParams, EngagementEstimator, EngagementSecond, FaceFrame, FrameOutcome,
-    SourceId,
+    EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome,
 };
 use node_shell::{NodeShell, Outbox, ShellOptions};
-use qt_therapy_msgs::builtin_interfaces::Time;
-use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, OPENFACE_FEATURES};
-use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement, OpenFaceFeatures};
-use std::collections::HashMap;
+use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -28,44 +25,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .build()
         .context("starting the async runtime")?
         .block_on(serve(args))
-}
-
-/// Maps "<camera>/<face>" to the estimator's numeric source ids and back.
-#[derive(Default)]
-struct Sources {
-    ids: HashMap<String, SourceId>,
-    names: Vec<String>,
-}
-
-impl Sources {
-    fn id(&mut self, frame: &OpenFaceFeatures) -> SourceId {
-        let name = format!("{}/{}", frame.header.frame_id, frame.face_id);
-        if let Some(id) = self.ids.get(&name) {
-            return *id;
-        }
-        let id = self.names.len() as SourceId;
-        self.names.push(name.clone());
-        self.ids.insert(name, id);
-        id
-    }
-
-    fn name(&self, id: SourceId) -> &str {
-        self.names.get(id as usize).map_or("?", String::as_str)
-    }
-}
-
-fn expected(second: &EngagementSecond, sources: &Sources) -> ExpectedEngagement {
-    ExpectedEngagement {
-        header: Header::at(Time::from_nanos(second.window_end_ns)),
-        source: sources.name(second.source).to_string(),
-        window_start: Time::from_nanos(second.window_start_ns),
-        window_end: Time::from_nanos(second.window_end_ns),
-        has_faces: second.engagement.is_some(),
-        mean: second.engagement.unwrap_or(0.0) as f32,
-        smoothed: second.smoothed_engagement.unwrap_or(0.0) as f32,
-        frame_count: second.frame_count(),
-        missing_count: second.missing_frames,
-    }
 }
 
 async fn serve(args: Args) -> anyhow::Result<()> {
@@ -90,7 +49,7 @@ async fn serve(args: Args) -> anyhow::Result<()> {
                               sources: &Sources,
                               out: &Outbox<ExpectedEngagement>| {
             for s in closed.drain(..) {
-                out.send(expected(&s, sources));
+                out.send(sources.expected_engagement(&s));
             }
         };
         // Message time runs on between frames at the wall clock's pace, so a camera that stops
@@ -103,15 +62,8 @@ async fn serve(args: Args) -> anyhow::Result<()> {
             tokio::select! {
                 _ = &mut stop => break,
                 Some(frame) = frames.recv() => {
-                    let source = sources.id(&frame);
-                    let stamp_ns = frame.header.stamp.to_nanos();
-                    let face = FaceFrame {
-                        stamp_ns,
-                        source,
-                        detection_success: frame.success,
-                        confidence: frame.confidence,
-                        features: &frame.features,
-                    };
+                    let face = sources.face_frame(&frame);
+                    let stamp_ns = face.stamp_ns;
                     match estimator.on_frame(&face, &mut |s| closed.push(*s)) {
                         Ok(outcome) => {
                             let (label, probability) = match outcome {

@@ -92,6 +92,12 @@ impl GameManager {
                 }
                 return Err(format!("busy with session {:?}: stop it first", s.id));
             }
+            let lost = self.lost_names();
+            if !lost.is_empty() {
+                return Err(format!(
+                    "node lost: {lost}; a session can start when it is back"
+                ));
+            }
             if self.used_sessions.contains(&c.session_id) {
                 return Err("this session id was already used; start a new session id".into());
             }
@@ -124,6 +130,12 @@ impl GameManager {
         }
         match c.command {
             TherapistCommand::PAUSE if s.paused_since.is_some() => Err("already paused".into()),
+            TherapistCommand::RESUME if s.paused_since.is_none() && s.held_since.is_some() => {
+                Err(format!(
+                    "held because a node is lost ({}): it can go on when the node is back",
+                    self.lost_names()
+                ))
+            }
             TherapistCommand::RESUME if s.paused_since.is_none() => Err("not paused".into()),
             TherapistCommand::OVERRIDE_LEVEL => {
                 if Level::new(c.level.into()).is_err() {
@@ -177,6 +189,7 @@ impl GameManager {
             next_sequence_id: 1,
             pending_override: None,
             paused_since: None,
+            held_since: None,
             talk_start_ns: now,
             started_ns: now,
             results: Vec::new(),
@@ -213,9 +226,19 @@ impl GameManager {
     }
 
     fn pause(&mut self, command_id: u64, now: i64) {
+        let was_paused = self.paused();
         if let Some(s) = self.session.as_mut() {
             s.paused_since = Some(now);
         }
+        if !was_paused {
+            self.suspend(now);
+        }
+        self.status = format!("paused by the therapist (command {command_id})");
+        self.publish_state(now);
+    }
+
+    /// Stops what the robot is doing for a pause or a hold.
+    pub(super) fn suspend(&mut self, now: i64) {
         match self.phase {
             Phase::GivingFeedback | Phase::SayingSequence => {
                 // A half-said sequence is not fair to the child: say it again on resume.
@@ -232,8 +255,6 @@ impl GameManager {
             }
             _ => {}
         }
-        self.status = format!("paused by the therapist (command {command_id})");
-        self.publish_state(now);
     }
 
     fn resume(&mut self, now: i64) {
@@ -246,17 +267,33 @@ impl GameManager {
             LogLevel::Info,
             format!("resumed after {:.1} s", paused_for as f64 * 1e-9),
         );
+        if self.paused() {
+            // publish_state names the lost nodes.
+            self.status = "resumed by the therapist; still held until the node is back".into();
+            self.publish_state(now);
+            return;
+        }
+        self.continue_play("resumed", now);
+    }
+
+    /// Goes on where a pause or a hold stopped; `why` starts the status.
+    pub(super) fn continue_play(&mut self, why: &str, now: i64) {
         match self.phase {
-            Phase::GivingFeedback | Phase::SayingSequence => self.start_presentation(now),
+            Phase::GivingFeedback | Phase::SayingSequence => {
+                // Say why first; the presentation then publishes its own status.
+                self.status = why.to_string();
+                self.publish_state(now);
+                self.start_presentation(now)
+            }
             Phase::WaitingForAnswer => {
                 let left = self.current.answer_left_ns.take().unwrap_or(0);
                 self.current.answer_deadline_ns = now + left;
                 self.set_timer(Timer::AnswerTimeout, now + left);
-                self.status = "resumed: waiting for the answer".into();
+                self.status = format!("{why}: waiting for the answer");
                 self.publish_state(now);
             }
             _ => {
-                self.status = "resumed".into();
+                self.status = why.to_string();
                 self.publish_state(now);
                 self.maybe_present(now);
             }

@@ -2,6 +2,7 @@
 //! One session at a time: decide (policy, override or fallback) -> feedback -> say the
 //! sequence -> tablet task -> answer or timeout -> score with engagement -> next, x omega.
 //! The therapist can start, pause, resume, stop, override the next level or emergency-stop.
+//! A watched node that stops its heartbeat holds the session, with the robot silent.
 
 mod commands;
 mod decide;
@@ -9,6 +10,7 @@ mod outcome;
 mod present;
 #[cfg(test)]
 mod tests;
+mod watch;
 
 use crate::params::{GameManagerParams, ParamError};
 use crate::protocol::{Input, LogLevel, Output};
@@ -96,6 +98,8 @@ struct Session {
     /// (sequence index, level) the therapist set.
     pending_override: Option<(u8, Level)>,
     paused_since: Option<i64>,
+    /// Held since then because a watched node is lost (a pause the therapist did not ask for).
+    held_since: Option<i64>,
     /// Start of the current engagement period: end of the previous answer, or session start.
     talk_start_ns: i64,
     started_ns: i64,
@@ -120,6 +124,10 @@ pub struct GameManager {
     timers: BTreeMap<u64, Timer>,
     next_timer_id: u64,
     next_request_id: u64,
+    /// Watched nodes by name; empty until the first heartbeat.
+    watched: BTreeMap<String, watch::Watched>,
+    /// The heartbeat watchdog's timer id, while one is set.
+    watchdog: Option<u64>,
     status: String,
     out: Vec<Output>,
 }
@@ -138,6 +146,8 @@ impl GameManager {
             timers: BTreeMap::new(),
             next_timer_id: 1,
             next_request_id: 1,
+            watched: BTreeMap::new(),
+            watchdog: None,
             status: "waiting for a therapist to start a session".into(),
             out: Vec::new(),
         })
@@ -184,6 +194,8 @@ impl GameManager {
             Input::DecisionFailed { request_id, reason } => {
                 self.on_decision(request_id, Err(reason), now)
             }
+            Input::Heartbeat(hb) => self.on_heartbeat(hb, now),
+            Input::TimerFired { id } if self.watchdog == Some(id) => self.on_watchdog(now),
             Input::TimerFired { id } => {
                 if let Some(timer) = self.timers.remove(&id) {
                     self.on_timer(timer, now);
@@ -217,7 +229,7 @@ impl GameManager {
     fn paused(&self) -> bool {
         self.session
             .as_ref()
-            .is_some_and(|s| s.paused_since.is_some())
+            .is_some_and(|s| s.paused_since.is_some() || s.held_since.is_some())
     }
 
     fn log(&mut self, level: LogLevel, message: String) {
@@ -263,12 +275,19 @@ impl GameManager {
             }
         };
         let plan = self.current.plan.as_ref();
+        // Which node is lost stays in view whatever else happens meanwhile.
+        let lost = self.lost_names();
+        let status = if lost.is_empty() {
+            self.status.clone()
+        } else {
+            format!("node lost: {lost}; {}", self.status)
+        };
         let msg = match &self.session {
             None => GameState {
                 header: Header::at(Time::from_nanos(now)),
                 phase,
                 user_model_cluster: -1,
-                status: self.status.clone(),
+                status: status.clone(),
                 ..Default::default()
             },
             Some(s) => GameState {
@@ -282,7 +301,7 @@ impl GameManager {
                 feedback: plan.map_or(s.state.feedback, |p| p.feedback) as u8,
                 last_score: s.state.previous_score,
                 policy_fallback: plan.is_some_and(|p| p.fallback),
-                status: self.status.clone(),
+                status: status.clone(),
             },
         };
         self.out.push(Output::State(msg));

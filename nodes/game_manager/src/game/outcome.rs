@@ -128,7 +128,7 @@ impl GameManager {
         s.talk_start_ns = c.answered_ns;
         s.results.push(result.clone());
         let last = s.index >= self.params.sequences_per_session as u8;
-        let line = sequence_line(&result, self.sequences(), &plan.reason);
+        let line = sequence_line(&result, Some(self.sequences()), &plan.reason);
         self.engagement.forget_before(c.answered_ns);
         self.out.push(Output::Record(Box::new(record)));
         self.out.push(Output::Result(result));
@@ -195,6 +195,7 @@ impl GameManager {
             return;
         };
         s.paused_since = None;
+        s.held_since = None;
         let with_e: Vec<f64> = s
             .results
             .iter()

@@ -186,6 +186,16 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                     overridden = true;
                 }
                 if s.phase == GameState::FINISHED {
+                    // Results travel on their own topic, so the last one may arrive after the
+                    // state that ends the session: listen a little longer.
+                    let grace = tokio::time::sleep(Duration::from_secs(2));
+                    tokio::pin!(grace);
+                    loop {
+                        tokio::select! {
+                            _ = &mut grace => break,
+                            Some(r) = results.recv() => emit(result_event(&r)),
+                        }
+                    }
                     emit(serde_json::json!({"event": "done"}));
                     return Ok(0);
                 }
@@ -221,11 +231,15 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
             Some(a) = due_answers.recv() => {
                 answers.send(a);
             }
-            Some(r) = results.recv() => emit(serde_json::json!({
-                "event": "result", "index": r.sequence_index, "level": r.level, "outcome": r.outcome,
-                "timed_out": r.timed_out, "overridden": r.overridden, "engagement": r.engagement,
-                "seconds": r.engagement_per_second.len(),
-            })),
+            Some(r) = results.recv() => emit(result_event(&r)),
         }
     }
+}
+
+fn result_event(r: &SequenceResult) -> serde_json::Value {
+    serde_json::json!({
+        "event": "result", "index": r.sequence_index, "level": r.level, "outcome": r.outcome,
+        "timed_out": r.timed_out, "overridden": r.overridden, "engagement": r.engagement,
+        "seconds": r.engagement_per_second.len(),
+    })
 }

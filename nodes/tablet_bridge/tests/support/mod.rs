@@ -1,15 +1,13 @@
-//! Helpers of the browser test: child processes killed on drop, the private loopback network
-//! namespace every DDS process runs in, deadlines on every wait, and a WebDriver page.
+//! Helpers of the browser test: child processes killed on drop, deadlines on every wait, and
+//! a WebDriver page. (The loopback namespace every DDS process runs in is `loopback_netns`.)
 
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-pub fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+pub use loopback_netns::workspace_root;
 
 /// `name` on PATH, if it is there.
 pub fn which(name: &str) -> Option<PathBuf> {
@@ -17,19 +15,6 @@ pub fn which(name: &str) -> Option<PathBuf> {
     std::env::split_paths(&path)
         .map(|d| d.join(name))
         .find(|p| p.is_file())
-}
-
-/// Whether this machine lets us make a network namespace (root, or user namespaces).
-pub fn can_make_network_namespace() -> bool {
-    let ok = |args: &[&str]| {
-        Command::new("unshare")
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    ok(&["-n", "true"]) || ok(&["-rn", "true"])
 }
 
 /// A child process that is killed when the test ends, however it ends.
@@ -272,7 +257,7 @@ impl Page {
     }
 }
 
-/// The processes' output files, and the JSON events a process printed.
+/// The processes' output files.
 pub struct Logs {
     pub dir: tempfile::TempDir,
 }
@@ -284,18 +269,11 @@ impl Logs {
     pub fn read(&self, name: &str) -> String {
         std::fs::read_to_string(self.dir.path().join(name)).unwrap_or_default()
     }
-    pub fn events(&self, name: &str, event: &str) -> Vec<Value> {
-        self.read(name)
-            .lines()
-            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-            .filter(|v| v["event"] == event)
-            .collect()
-    }
     pub fn dump(&self) -> String {
         let mut s = String::new();
-        for f in ["peer.out", "peer.err", "bridge.err", "chromedriver.log"] {
+        for f in ["launch.out", "launch.err", "chromedriver.log"] {
             let text = self.read(f);
-            let tail: Vec<&str> = text.lines().rev().take(60).collect();
+            let tail: Vec<&str> = text.lines().rev().take(80).collect();
             s += &format!("--- {f} (last lines)\n");
             for l in tail.into_iter().rev() {
                 s += l;

@@ -1,5 +1,5 @@
-//! `user_model fit`: reads interaction data (the study directory or our CSV), fits the user
-//! models, writes the model file and the Fig. 3 plots, and prints the per-cluster numbers.
+//! `user_model fit`: reads interaction data (the study directory, our CSV, session bags),
+//! fits the user models, writes the model file and the Fig. 3 plots, and prints the per-cluster numbers.
 
 use anyhow::{Context, bail};
 use std::io::Write;
@@ -8,10 +8,11 @@ use user_model::{FitOptions, Kernel};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The study directory (sequences.csv + engagement_per_second.csv) or a CSV of records in
-    /// our format.
-    #[arg(long)]
-    data: PathBuf,
+    /// The data: a study directory (sequences.csv + engagement_per_second.csv), a CSV of
+    /// records in our format, a session bag (.mcap) or a directory of bags; several may be
+    /// given (`--data a.mcap b.mcap`), and all their records are fitted together.
+    #[arg(long, num_args = 1.., required = true)]
+    data: Vec<PathBuf>,
     /// Number of clusters c.
     #[arg(long, default_value_t = 2)]
     clusters: usize,
@@ -74,18 +75,21 @@ fn kernel(a: &Args) -> anyhow::Result<Kernel> {
 }
 
 pub fn main(a: Args) -> anyhow::Result<()> {
-    let records = user_model::data::read_any(&a.data)
-        .with_context(|| format!("reading {}", a.data.display()))?;
+    let data = a
+        .data
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let read =
+        user_model::data::read_sources(&a.data).with_context(|| format!("reading {data}"))?;
+    for w in &read.warnings {
+        eprintln!("warning: {w}");
+    }
+    let records = read.records;
     let mut provenance = format!(
         "user_model fit --data {} --clusters {} --seed {} --kernel {} --length-scale {} --alpha {} --restarts {} --kmeans-restarts {}",
-        a.data.display(),
-        a.clusters,
-        a.seed,
-        a.kernel,
-        a.length_scale,
-        a.alpha,
-        a.restarts,
-        a.kmeans_restarts
+        data, a.clusters, a.seed, a.kernel, a.length_scale, a.alpha, a.restarts, a.kmeans_restarts
     );
     if a.fixed {
         provenance.push_str(" --fixed");
@@ -101,8 +105,7 @@ pub fn main(a: Args) -> anyhow::Result<()> {
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
-    let set = user_model::fit(&records, &options)
-        .with_context(|| format!("fitting {}", a.data.display()))?;
+    let set = user_model::fit(&records, &options).with_context(|| format!("fitting {data}"))?;
     let took = started.elapsed();
     set.save(&a.output)?;
     let figures = a

@@ -1,8 +1,8 @@
 //! Interaction data: one [`InteractionRecord`] per solved sequence. Readers fill it from our CSV
-//! format ([`csv`]) and from the MigrAVE study's own files ([`study`]); a reader of recorded
-//! sessions (bags) is meant to live beside them and produce the same type, checked with
-//! [`InteractionRecord::validate`].
+//! format ([`csv_file`]), from the MigrAVE study's own files ([`study`]) and from our recorded
+//! sessions ([`bag`]); all produce the same type, checked with [`InteractionRecord::validate`].
 
+pub mod bag;
 pub mod csv_file;
 pub mod study;
 
@@ -59,6 +59,18 @@ pub enum DataError {
     Column { path: PathBuf, column: String },
     #[error("{path}: no records")]
     Empty { path: PathBuf },
+    #[error(transparent)]
+    Bag(::bag::BagError),
+    #[error("{bag}: no topic {topic:?} in the bag, which user-model data needs: {why}")]
+    MissingTopic {
+        bag: String,
+        topic: &'static str,
+        why: &'static str,
+    },
+    #[error("{bag}: no message on {topic:?}, so no solved sequence to learn from")]
+    NoSequences { bag: String, topic: &'static str },
+    #[error("{path}: neither a study directory (sequences.csv) nor a directory holding .mcap bags")]
+    NoData { path: PathBuf },
 }
 
 impl DataError {
@@ -152,12 +164,40 @@ pub fn validate_all(records: &[InteractionRecord]) -> Result<(), DataError> {
     Ok(())
 }
 
-/// Reads a data set: a study directory (`sequences.csv` + `engagement_per_second.csv`), or a
-/// CSV file in our format.
+/// Reads a data set: a study directory (`sequences.csv` + `engagement_per_second.csv`), a
+/// CSV file in our format, a bag (`.mcap`) or a directory of bags. Warnings of the bag reader
+/// are logged; [`read_sources`] returns them.
 pub fn read_any(path: &Path) -> Result<Vec<InteractionRecord>, DataError> {
-    if path.is_dir() {
-        read_study(path)
-    } else {
-        read_csv(path)
+    read_sources(&[path.to_path_buf()]).map(|d| d.records)
+}
+
+/// Reads and joins several data sets (each as [`read_any`]): study directories and CSV files in
+/// the order given, then every bag named or found in a directory, read together (a user's
+/// sessions may be in several bags; see [`bag::read_bags`]).
+pub fn read_sources(paths: &[PathBuf]) -> Result<bag::BagRecords, DataError> {
+    let mut out = bag::BagRecords::default();
+    let mut bags = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            if path.join("sequences.csv").exists() {
+                out.records.extend(read_study(path)?);
+            } else {
+                let found = bag::bags_in(path)?;
+                if found.is_empty() {
+                    return Err(DataError::NoData { path: path.clone() });
+                }
+                bags.extend(found);
+            }
+        } else if bag::is_bag(path) {
+            bags.push(path.clone());
+        } else {
+            out.records.extend(read_csv(path)?);
+        }
     }
+    if !bags.is_empty() {
+        let from_bags = bag::read_bags(&bags)?;
+        out.records.extend(from_bags.records);
+        out.warnings.extend(from_bags.warnings);
+    }
+    Ok(out)
 }

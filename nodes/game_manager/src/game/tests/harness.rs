@@ -7,8 +7,9 @@ use crate::params::GameManagerParams;
 use crate::protocol::{Input, Output};
 use crate::session_file::{SequenceRecord, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{
-    DecideActionRequest, DecideActionResponse, Decision, ExpectedEngagement, GameState,
+    DecideActionRequest, DecideActionResponse, Decision, ExpectedEngagement, GameState, Heartbeat,
     SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
 };
 use sequence_game::{Action, Emotion, State};
@@ -177,6 +178,23 @@ impl Harness {
                 ..Default::default()
             };
             self.at((sec + 1) * S + S / 5, Input::Engagement(msg));
+        }
+    }
+
+    /// Heartbeats of `node` (process `pid`) every 100 ms in [from, to).
+    pub fn heartbeats(&mut self, node: &str, pid: u32, from: i64, to: i64) {
+        let mut t = from;
+        let mut sequence = 0;
+        while t < to {
+            let hb = Heartbeat {
+                header: Header::at(Time::from_nanos(t)),
+                node_name: node.into(),
+                pid,
+                sequence,
+            };
+            self.at(t, Input::Heartbeat(hb));
+            sequence += 1;
+            t += S / 10;
         }
     }
 

@@ -3,4 +3,5 @@
 mod answers;
 mod commands;
 mod harness;
+mod heartbeats;
 mod session;

@@ -1,0 +1,104 @@
+//! The node's messages to and from the policy core: a `SequenceResult` becomes the
+//! `Transition` it learns from, and a core `Decision` becomes the `Decision` message. The DDS
+//! node, the bag replays and the replay benchmark share them, so a replay checks the node's own
+//! conversion.
+
+use crate::learning::Mode;
+use crate::policy_core::{Decision, Transition};
+use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::{BehaviourState, SequenceResult};
+use sequence_game::{Action, GameError, SEQUENCES_PER_SESSION, State};
+
+/// Why a `SequenceResult` cannot be learned from.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultError {
+    #[error("state: {0}")]
+    State(String),
+    #[error(transparent)]
+    Game(#[from] GameError),
+}
+
+/// The live game's transition: the next state's PS is this sequence's own score, and a
+/// sequence without a face seen counts as neutral engagement (0), so only RE speaks.
+pub fn transition(r: &SequenceResult) -> Result<Transition, ResultError> {
+    let state = r
+        .state
+        .to_state()
+        .map_err(|e| ResultError::State(e.reason))?;
+    let action = Action::new(r.action.into())?;
+    let next_state = State::new(
+        r.level.into(),
+        r.feedback.into(),
+        i64::from(r.level) * i64::from(r.outcome),
+    )?;
+    let engagement = if r.engagement_per_second.is_empty() {
+        0.0
+    } else {
+        f64::from(r.engagement)
+    };
+    Ok(Transition {
+        state,
+        action,
+        activity_result: f64::from(r.activity_result),
+        engagement,
+        next_state,
+        is_last: usize::from(r.sequence_index) >= SEQUENCES_PER_SESSION,
+    })
+}
+
+/// The `Decision` message of a core decision; `model_used` says which Q-table made it.
+pub fn decision_message(
+    d: &Decision,
+    header: Header,
+    session_id: &str,
+    model_used: String,
+) -> qt_therapy_msgs::Decision {
+    qt_therapy_msgs::Decision {
+        header,
+        session_id: session_id.to_string(),
+        step: d.step,
+        state: BehaviourState::from_state(d.state),
+        action: d.action.index() as u8,
+        level: d.level.get(),
+        feedback: d.feedback as u8,
+        q_values: d.q_values.to_vec(),
+        probabilities: d.probabilities.to_vec(),
+        temperature: d.temperature,
+        explored: d.explored,
+        exploitation_only: d.mode == Mode::Exploit,
+        model_used,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_result_becomes_the_transition_the_game_played() {
+        let r = SequenceResult {
+            sequence_index: 10,
+            state: BehaviourState::from_state(State::START),
+            action: 1,
+            level: 2,
+            feedback: 0,
+            outcome: -1,
+            activity_result: -1.0,
+            engagement: 0.5,
+            ..Default::default()
+        };
+        let t = transition(&r).expect("valid");
+        assert_eq!(t.next_state, State::new(2, 0, -2).expect("state"));
+        assert_eq!(t.engagement, 0.0, "no seconds with a face: neutral");
+        assert!(t.is_last);
+        let seen = SequenceResult {
+            engagement_per_second: vec![0.5],
+            sequence_index: 3,
+            ..r.clone()
+        };
+        let t = transition(&seen).expect("valid");
+        assert_eq!((t.engagement, t.is_last), (0.5, false));
+        let bad = SequenceResult { action: 9, ..r };
+        assert!(transition(&bad).is_err());
+    }
+}

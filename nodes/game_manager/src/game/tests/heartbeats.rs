@@ -1,0 +1,264 @@
+//! A watched node that stops its heartbeat: lost exactly at the timeout, the robot silenced,
+//! the session held (paused, not lost) with the node named in GameState, and resumed when it
+//! is back (by itself, or by the therapist); a start refused meanwhile; no sequence played or
+//! recorded twice.
+
+use super::harness::*;
+use crate::params::GameManagerParams;
+use crate::protocol::{Input, Output};
+use crate::session_file::SessionEnd;
+use qt_therapy_msgs::{GameState, TherapistCommand as C};
+
+const POLICY: &str = "behaviour_policy";
+const CLASSIFIER: &str = "engagement_classifier";
+
+fn params(auto_resume: bool) -> GameManagerParams {
+    GameManagerParams {
+        watched_nodes: vec![POLICY.into(), CLASSIFIER.into()],
+        auto_resume_after_node_loss: auto_resume,
+        ..Default::default()
+    }
+}
+
+/// A session from T0 whose policy process (pid 20) dies at 20 s and is back as pid 21 at
+/// 30 s; the classifier beats all along. Sequence 2's words start at 21 s (one every 3 s
+/// from 22.5 s), so the loss falls mid-sequence.
+fn policy_killed_at_20_s(auto_resume: bool) -> Harness {
+    let mut h = Harness::new(params(auto_resume), rule_policy(), scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 20 * S);
+    h.heartbeats(POLICY, 21, T0 + 30 * S, T0 + 400 * S);
+    h.start("s");
+    h
+}
+
+fn sequence_indices(h: &Harness) -> Vec<u8> {
+    h.results().iter().map(|r| r.sequence_index).collect()
+}
+
+#[test]
+fn a_lost_node_holds_the_session_silently_until_it_is_back() {
+    let mut h = policy_killed_at_20_s(true);
+    // Last heartbeat at 19.9 s: lost at 23.9 s, not a nanosecond before.
+    h.run_until(T0 + ns(23.9) - 1);
+    assert!(h.gm.lost_nodes().is_empty());
+    assert_eq!(h.last_state().phase, GameState::SAYING_SEQUENCE);
+    let before = h.log.len();
+    h.run_until(T0 + ns(23.9));
+    assert_eq!(h.gm.lost_nodes(), vec![POLICY]);
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::PAUSED);
+    assert!(
+        state
+            .status
+            .starts_with("node lost: behaviour_policy; session paused"),
+        "{}",
+        state.status
+    );
+    assert_eq!(
+        h.robot_outputs_since(before),
+        vec![Output::Say(String::new())],
+        "silenced at once"
+    );
+    assert!(
+        h.warnings()
+            .iter()
+            .any(|w| w.contains("behaviour_policy (no heartbeat for 4.0 s, last pid 20)"))
+    );
+
+    // Held: nothing reaches the robot or the tablet; the node stays named in GameState.
+    let lost_at = h.log.len();
+    let tasks = h.tasks().len();
+    h.run_until(T0 + 30 * S - 1);
+    assert_eq!(h.robot_outputs_since(lost_at), vec![]);
+    assert_eq!(h.tasks().len(), tasks);
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::PAUSED);
+    assert!(state.status.starts_with("node lost: behaviour_policy"));
+
+    // Back as a new process: the sequence is said again from its start.
+    h.run_until(T0 + 30 * S);
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::SAYING_SEQUENCE);
+    assert!(h.gm.lost_nodes().is_empty());
+    assert!(h.outputs().any(|o| matches!(o, Output::State(s)
+        if s.status == "node behaviour_policy is back (pid 21) after 6.1 s lost: resumed")));
+    h.run_until(T0 + 400 * S);
+    assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+    assert!(
+        h.results().iter().all(|r| r.outcome == 1),
+        "every sequence heard whole"
+    );
+    assert_eq!(h.records().len(), 10);
+    let s = &h.summaries()[0];
+    assert_eq!((s.end, s.sequences_played), (SessionEnd::Finished, 10));
+}
+
+#[test]
+fn without_auto_resume_the_therapist_resumes_once_the_node_is_back() {
+    let mut h = policy_killed_at_20_s(false);
+    h.run_until(T0 + 25 * S);
+    let lost_at = h.log.len();
+    // Too early: the node is still lost.
+    h.feed(Input::Command(command(C::RESUME, "s", 2)));
+    let status = h.last_state().status;
+    assert!(
+        status.contains("rejected") && status.contains("held because a node is lost"),
+        "{status}"
+    );
+    h.run_until(T0 + 35 * S);
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::PAUSED);
+    assert!(
+        state.status.ends_with("waiting for the therapist's resume"),
+        "{}",
+        state.status
+    );
+    assert_eq!(h.robot_outputs_since(lost_at), vec![]);
+    h.feed(Input::Command(command(C::RESUME, "s", 3)));
+    assert_eq!(h.last_state().phase, GameState::SAYING_SEQUENCE);
+    h.run_until(T0 + 400 * S);
+    assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+    assert_eq!(h.summaries()[0].rejected_commands, 1);
+}
+
+#[test]
+fn a_therapist_pause_outlasts_the_hold_and_a_quick_restart_is_only_logged() {
+    let mut h = Harness::new(params(true), rule_policy(), scripted_child(vec![]));
+    // The classifier restarts within the timeout (1 s gap): never lost, but logged.
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 50 * S);
+    h.heartbeats(CLASSIFIER, 11, T0 + 51 * S, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 20 * S);
+    h.heartbeats(POLICY, 21, T0 + 30 * S, T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 22 * S);
+    h.feed(Input::Command(command(C::PAUSE, "s", 2)));
+    let paused_at = h.log.len();
+    h.run_until(T0 + 31 * S);
+    assert_eq!(h.robot_outputs_since(paused_at), vec![], "already silent");
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::PAUSED);
+    assert!(
+        state.status.ends_with("still paused by the therapist"),
+        "{}",
+        state.status
+    );
+    h.feed(Input::Command(command(C::RESUME, "s", 3)));
+    assert_eq!(h.last_state().phase, GameState::SAYING_SEQUENCE);
+    h.run_until(T0 + 400 * S);
+    assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+    assert!(h.warnings().iter().any(
+        |w| w == "node engagement_classifier restarted (pid 10 -> 11) within the loss timeout"
+    ));
+    assert_eq!(
+        h.warnings()
+            .iter()
+            .filter(|w| w.starts_with("node lost"))
+            .count(),
+        1
+    );
+}
+
+#[test]
+fn a_start_waits_for_every_watched_node_and_unwatched_ones_do_not_count() {
+    let mut h = Harness::new(params(true), rule_policy(), scripted_child(vec![]));
+    // Heartbeats of a node nobody watches start no watch.
+    h.heartbeats("simulated_child", 5, T0, T0 + 60 * S);
+    h.run_until(T0 + 10 * S);
+    assert!(h.gm.lost_nodes().is_empty());
+    assert!(h.warnings().is_empty());
+    // From the classifier's first heartbeat on, the policy (never heard) has 4 s.
+    h.heartbeats(CLASSIFIER, 10, T0 + 10 * S, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0 + 20 * S, T0 + 400 * S);
+    h.run_until(T0 + 14 * S - 1);
+    assert!(h.gm.lost_nodes().is_empty());
+    h.run_until(T0 + 14 * S);
+    assert_eq!(h.gm.lost_nodes(), vec![POLICY]);
+    assert!(h.warnings().iter().any(|w| w.contains("never heard")));
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::IDLE);
+    assert!(
+        state
+            .status
+            .starts_with("node lost: behaviour_policy; a session cannot start"),
+        "{}",
+        state.status
+    );
+    h.run_until(T0 + 15 * S);
+    h.feed(Input::Command(command(C::START, "s", 1)));
+    let status = h.last_state().status;
+    assert!(
+        status.starts_with("node lost: behaviour_policy; rejected command 1 (start)"),
+        "{status}"
+    );
+    assert!(h.robot_outputs_since(0).is_empty());
+    h.run_until(T0 + 20 * S);
+    assert!(h.gm.lost_nodes().is_empty());
+    h.feed(Input::Command(command(C::START, "s", 2)));
+    assert_eq!(h.last_state().phase, GameState::DECIDING);
+    h.run_until(T0 + 400 * S);
+    assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+}
+
+#[test]
+fn a_hold_while_the_task_waits_keeps_the_task_and_suspends_its_timeout() {
+    // Task 1 goes out at 14 s (timeout 60 s); the child never answers it. The policy's last
+    // heartbeat is at 15.9 s: held from 19.9 s to its return at 40 s (20.1 s).
+    let child = scripted_child(vec![(1, ChildReply::Nothing)]);
+    let mut h = Harness::new(params(true), rule_policy(), child);
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 16 * S);
+    h.heartbeats(POLICY, 21, T0 + 40 * S, T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 20 * S);
+    assert_eq!(h.last_state().phase, GameState::PAUSED);
+    let held_at = h.log.len();
+    h.run_until(T0 + 40 * S);
+    assert_eq!(h.last_state().phase, GameState::WAITING_FOR_ANSWER);
+    assert!(
+        h.last_state()
+            .status
+            .ends_with("resumed: waiting for the answer"),
+        "{}",
+        h.last_state().status
+    );
+    assert_eq!(h.robot_outputs_since(held_at), vec![]);
+    h.run_until(T0 + 200 * S);
+    let timed_out_at = h
+        .log
+        .iter()
+        .find(|(_, o)| matches!(o, Output::Result(_)))
+        .map(|(t, _)| *t);
+    assert_eq!(timed_out_at, Some(T0 + 14 * S + 60 * S + ns(20.1)));
+    assert!(h.results()[0].timed_out);
+    let task_ids: Vec<u32> = h.tasks().iter().map(|(_, t)| t.sequence_id).collect();
+    assert_eq!(task_ids, (1..=task_ids.len() as u32).collect::<Vec<u32>>());
+    assert_eq!(h.tasks()[0].1.sequence_index, 1);
+    assert_eq!(
+        h.tasks()[1].1.sequence_index,
+        2,
+        "task 1 was not sent again"
+    );
+}
+
+#[test]
+fn a_therapist_resume_during_a_hold_leaves_the_hold_to_the_node() {
+    let mut h = policy_killed_at_20_s(true);
+    h.run_until(T0 + 22 * S);
+    h.feed(Input::Command(command(C::PAUSE, "s", 2)));
+    h.run_until(T0 + 25 * S);
+    h.feed(Input::Command(command(C::RESUME, "s", 3)));
+    let state = h.last_state();
+    assert_eq!(state.phase, GameState::PAUSED);
+    assert_eq!(
+        state.status,
+        "node lost: behaviour_policy; resumed by the therapist; still held until the node is back"
+    );
+    let resumed_at = h.log.len();
+    h.run_until(T0 + 30 * S - 1);
+    assert_eq!(h.robot_outputs_since(resumed_at), vec![]);
+    h.run_until(T0 + 30 * S);
+    assert_eq!(h.last_state().phase, GameState::SAYING_SEQUENCE);
+    h.run_until(T0 + 400 * S);
+    assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+}

@@ -1,0 +1,207 @@
+//! Watching the other nodes' heartbeats (RustDDS reports no DDS liveliness, so the suite has
+//! its own, as Nav2's bond does). A watched node silent for `node_loss_timeout_s` is lost: the
+//! robot is silenced and the session held (paused, not lost) until every watched node is
+//! back; then it resumes by itself, or waits for the therapist's resume. One watchdog timer,
+//! due when the earliest-heard node would time out, so a loss is seen exactly at the timeout.
+
+use super::GameManager;
+use crate::protocol::{LogLevel, Output};
+use qt_therapy_msgs::Heartbeat;
+
+/// A watched node, as its heartbeats tell.
+#[derive(Debug, Clone)]
+pub(super) struct Watched {
+    /// Arrival of its last heartbeat (start of the watch for a node not heard yet).
+    last_ns: i64,
+    heard: bool,
+    pid: u32,
+    /// Since when it is lost.
+    lost_since: Option<i64>,
+}
+
+fn seconds(ns: i64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+impl GameManager {
+    fn loss_timeout_ns(&self) -> i64 {
+        (self.params.node_loss_timeout_s * 1e9).round() as i64
+    }
+
+    /// Watched nodes lost now, by name.
+    pub fn lost_nodes(&self) -> Vec<&str> {
+        self.watched
+            .iter()
+            .filter(|(_, w)| w.lost_since.is_some())
+            .map(|(n, _)| n.as_str())
+            .collect()
+    }
+
+    /// "a, b" of the lost nodes.
+    pub(super) fn lost_names(&self) -> String {
+        self.lost_nodes().join(", ")
+    }
+
+    pub(super) fn on_heartbeat(&mut self, hb: Heartbeat, now: i64) {
+        if !self.params.watched_nodes.contains(&hb.node_name) {
+            return;
+        }
+        if self.watched.is_empty() {
+            // A core that hears no heartbeat (a replay, a unit test) watches nothing; from
+            // the first one on, a node never heard is lost one timeout later.
+            for name in &self.params.watched_nodes {
+                let w = Watched {
+                    last_ns: now,
+                    heard: false,
+                    pid: 0,
+                    lost_since: None,
+                };
+                self.watched.insert(name.clone(), w);
+            }
+            let names = self.params.watched_nodes.join(", ");
+            self.log(
+                LogLevel::Info,
+                format!("watching the heartbeats of {names}"),
+            );
+        }
+        let Some(w) = self.watched.get_mut(&hb.node_name) else {
+            return;
+        };
+        let restarted = w.heard && w.pid != hb.pid;
+        let old_pid = w.pid;
+        w.last_ns = now;
+        w.heard = true;
+        w.pid = hb.pid;
+        if let Some(since) = w.lost_since.take() {
+            self.on_node_back(&hb.node_name, hb.pid, now - since, now);
+        } else if restarted {
+            // Back within the timeout: it was never lost, but its state is new.
+            self.log(
+                LogLevel::Warn,
+                format!(
+                    "node {} restarted (pid {old_pid} -> {}) within the loss timeout",
+                    hb.node_name, hb.pid
+                ),
+            );
+        }
+        self.arm_watchdog();
+    }
+
+    /// Sets the watchdog for the earliest deadline among the nodes not lost, unless one is set.
+    fn arm_watchdog(&mut self) {
+        if self.watchdog.is_some() {
+            return;
+        }
+        let timeout = self.loss_timeout_ns();
+        let due = self
+            .watched
+            .values()
+            .filter(|w| w.lost_since.is_none())
+            .map(|w| w.last_ns + timeout)
+            .min();
+        if let Some(at_ns) = due {
+            let id = self.next_timer_id;
+            self.next_timer_id += 1;
+            self.watchdog = Some(id);
+            self.out.push(Output::SetTimer { id, at_ns });
+        }
+    }
+
+    pub(super) fn on_watchdog(&mut self, now: i64) {
+        self.watchdog = None;
+        let timeout = self.loss_timeout_ns();
+        let mut lost = Vec::new();
+        for (name, w) in self.watched.iter_mut() {
+            if w.lost_since.is_none() && now - w.last_ns >= timeout {
+                w.lost_since = Some(now);
+                let last = if w.heard {
+                    format!("last pid {}", w.pid)
+                } else {
+                    "never heard".to_string()
+                };
+                lost.push(format!(
+                    "{name} (no heartbeat for {:.1} s, {last})",
+                    seconds(now - w.last_ns)
+                ));
+            }
+        }
+        if !lost.is_empty() {
+            self.on_nodes_lost(&lost.join(", "), now);
+        }
+        self.arm_watchdog();
+    }
+
+    /// Silences the robot and holds the session.
+    fn on_nodes_lost(&mut self, what: &str, now: i64) {
+        self.log(LogLevel::Warn, format!("node lost: {what}"));
+        let running = self.session_running();
+        let was_paused = self.paused();
+        if running
+            && let Some(s) = self.session.as_mut()
+            && s.held_since.is_none()
+        {
+            s.held_since = Some(now);
+            if !was_paused {
+                // Silence first: the empty utterance stops the robot mid-sentence.
+                self.out.push(Output::Say(String::new()));
+                self.suspend(now);
+            }
+        }
+        let line = if running {
+            self.status = if self.params.auto_resume_after_node_loss {
+                "session paused, robot silent; it resumes when the node is back".into()
+            } else {
+                "session paused, robot silent; resume it when the node is back".into()
+            };
+            format!("!! node lost: {what}: session paused, robot silent")
+        } else {
+            self.status = "a session cannot start until the node is back".into();
+            format!("!! node lost: {what}")
+        };
+        self.out.push(Output::LiveLine(line));
+        self.publish_state(now);
+    }
+
+    /// A lost node is back; when none is lost any more the session may go on.
+    fn on_node_back(&mut self, name: &str, pid: u32, lost_for: i64, now: i64) {
+        let back = format!(
+            "node {name} is back (pid {pid}) after {:.1} s lost",
+            seconds(lost_for)
+        );
+        self.log(LogLevel::Info, back.clone());
+        self.out.push(Output::LiveLine(back.clone()));
+        if !self.lost_nodes().is_empty() {
+            self.status = back;
+            self.publish_state(now);
+            return;
+        }
+        let held_since = self.session.as_mut().and_then(|s| s.held_since.take());
+        let Some(held_since) = held_since.filter(|_| self.session_running()) else {
+            self.status = back;
+            self.publish_state(now);
+            return;
+        };
+        let therapist_paused = self.paused();
+        if !self.params.auto_resume_after_node_loss {
+            if let Some(s) = self.session.as_mut()
+                && s.paused_since.is_none()
+            {
+                s.paused_since = Some(held_since);
+            }
+            self.status = format!("{back}: waiting for the therapist's resume");
+            self.publish_state(now);
+        } else if therapist_paused {
+            self.status = format!("{back}; still paused by the therapist");
+            self.publish_state(now);
+        } else {
+            self.log(
+                LogLevel::Info,
+                format!(
+                    "resumed after {:.1} s held for lost nodes",
+                    seconds(now - held_since)
+                ),
+            );
+            self.continue_play(&format!("{back}: resumed"), now);
+        }
+    }
+}

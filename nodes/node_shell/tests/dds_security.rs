@@ -1,0 +1,485 @@
+//! DDS Security end to end (only built with `--features security`): a keystore made by
+//! security/make_keystore.sh, a secured game-manager subscriber on the therapist command
+//! topic, and publishers that are authorised (tablet bridge enclave), unauthenticated (no
+//! security) and authenticated without publish permission (classifier and game-manager
+//! enclaves). An insecure control subscriber shows the unauthenticated publisher really
+//! publishes, so its silence at the secured subscriber is the security's doing.
+//! Each participant is its own process (this test binary in a role), all inside one private
+//! loopback-only network namespace (tests/loopback-netns).
+
+use node_shell::{NoParameters, NodeShell, ShellOptions};
+use qt_therapy_msgs::TherapistCommand;
+use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, THERAPIST_COMMAND};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+const IN_NAMESPACE: &str = "QT_DDS_SECURITY_TEST_IN_NAMESPACE";
+const ROLE: &str = "QT_DDS_SECURITY_TEST_ROLE";
+const SECURITY_VARS: [&str; 4] = [
+    "ROS_SECURITY_ENABLE",
+    "ROS_SECURITY_STRATEGY",
+    "ROS_SECURITY_KEYSTORE",
+    "ROS_SECURITY_ENCLAVE_OVERRIDE",
+];
+/// How long subscribers listen and publishers publish (secured discovery and the
+/// authentication handshake happen inside this window).
+const LISTEN: Duration = Duration::from_secs(30);
+const PUBLISH: Duration = Duration::from_secs(25);
+
+use loopback_netns::workspace_root;
+
+/// Runs the test `name` of this binary again inside a private loopback-only namespace (where
+/// it calls `inside`), or, when this process is a participant, plays its role. Returns the
+/// namespace run's stdout, or None where namespaces cannot be made or inside.
+fn in_loopback_namespace(name: &str, inside: fn()) -> Option<String> {
+    if let Ok(role) = std::env::var(ROLE) {
+        run_role(&role);
+        return None;
+    }
+    if std::env::var_os(IN_NAMESPACE).is_some() {
+        inside();
+        return None;
+    }
+    let out = loopback_netns::rerun_test_inside(
+        name,
+        &[(IN_NAMESPACE, name.as_ref())],
+        Duration::from_secs(180),
+    )?;
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!("{stdout}");
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    Some(stdout)
+}
+
+fn test_filter(name: &str) -> [&str; 5] {
+    [
+        "--exact",
+        name,
+        "--include-ignored",
+        "--nocapture",
+        "--test-threads=1",
+    ]
+}
+
+/// Runs security/make_keystore.sh into `dir/keystore` with the given payload protection.
+fn make_keystore(dir: &Path, data_protection: &str) -> PathBuf {
+    let keystore = dir.join("keystore");
+    let made = Command::new("bash")
+        .arg(workspace_root().join("security/make_keystore.sh"))
+        .arg(&keystore)
+        .env("DATA_PROTECTION_KIND", data_protection)
+        .output()
+        .expect("runs security/make_keystore.sh");
+    assert!(
+        made.status.success(),
+        "make_keystore.sh failed: {}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    keystore
+}
+
+#[test]
+fn only_the_tablet_bridge_enclave_delivers_therapist_commands() {
+    let name = "only_the_tablet_bridge_enclave_delivers_therapist_commands";
+    if let Some(stdout) = in_loopback_namespace(name, commands_inside_the_namespace) {
+        assert!(stdout.contains("DDS SECURITY CHECKED"), "{stdout}");
+    }
+}
+
+/// What fails in RustDDS 0.15.1 itself, without ros2-client or node_shell: with
+/// `data_protection_kind` ENCRYPT, a sample whose serialized payload is 20 bytes arrives and
+/// one of 17 bytes never does (the DATA submessage pads the encoded payload to 4 bytes and
+/// the decoder takes the padding as part of the crypto footer). This is why
+/// make_keystore.sh defaults to payload protection NONE under submessage ENCRYPT. Ignored
+/// (30 s); when it fails, RustDDS has been fixed and the governance can go back to ENCRYPT.
+#[test]
+#[ignore = "documents a RustDDS 0.15.1 bug; run with --ignored"]
+fn rustdds_payload_encryption_loses_samples_of_unaligned_length() {
+    let name = "rustdds_payload_encryption_loses_samples_of_unaligned_length";
+    if let Some(stdout) = in_loopback_namespace(name, unaligned_inside_the_namespace) {
+        assert!(stdout.contains("RUSTDDS BUG PRESENT"), "{stdout}");
+    }
+}
+
+/// One participant of a scenario.
+struct Participant {
+    label: &'static str,
+    child: Child,
+    log: PathBuf,
+}
+
+fn spawn(
+    dir: &Path,
+    label: &'static str,
+    role: &str,
+    keystore: Option<(&Path, &str)>,
+) -> Participant {
+    let params = dir.join(format!("{label}.yaml"));
+    std::fs::write(&params, format!("{label}:\n  ros__parameters: {{}}\n")).expect("params");
+    let log = dir.join(format!("{label}.log"));
+    let test = std::env::var(IN_NAMESPACE).expect("runs inside the namespace");
+    let mut command = Command::new(std::env::current_exe().expect("test binary"));
+    command
+        .args(test_filter(&test))
+        .env(ROLE, role)
+        .env("QT_TEST_NODE_NAME", label)
+        .env("QT_TEST_PARAMS", &params)
+        .env_remove(IN_NAMESPACE)
+        .stdout(std::fs::File::create(&log).expect("log"))
+        .stderr(std::fs::File::create(dir.join(format!("{label}.err"))).expect("log"));
+    for var in SECURITY_VARS {
+        command.env_remove(var);
+    }
+    if let Some((keystore, enclave)) = keystore {
+        command
+            .env("ROS_SECURITY_ENABLE", "true")
+            .env("ROS_SECURITY_STRATEGY", "Enforce")
+            .env("ROS_SECURITY_KEYSTORE", keystore)
+            .env("ROS_SECURITY_ENCLAVE_OVERRIDE", enclave);
+    }
+    Participant {
+        label,
+        child: command.spawn().expect("starts a participant"),
+        log,
+    }
+}
+
+/// Waits for a participant and returns its stdout; prints the tail of its stderr.
+fn finish(mut p: Participant, dir: &Path) -> String {
+    let started = Instant::now();
+    while p.child.try_wait().expect("wait").is_none() {
+        if started.elapsed() > LISTEN + Duration::from_secs(40) {
+            let _ = p.child.kill();
+            let _ = p.child.wait();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let out = std::fs::read_to_string(&p.log).unwrap_or_default();
+    let err = std::fs::read_to_string(dir.join(format!("{}.err", p.label))).unwrap_or_default();
+    let tail: Vec<&str> = err.lines().rev().take(5).collect();
+    println!(
+        "--- {} stderr (last lines) ---\n{}",
+        p.label,
+        tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+    );
+    out
+}
+
+/// Counts per sender that a subscriber printed as `RECEIVED <sender> <count>`.
+fn received(out: &str) -> BTreeMap<String, u64> {
+    out.lines()
+        // libtest's "test ... " may precede a marker on its line.
+        .filter_map(|l| l.split_once("RECEIVED ").map(|(_, rest)| rest))
+        .filter_map(|l| {
+            let (tag, n) = l.split_once(' ')?;
+            Some((tag.to_string(), n.trim().parse().ok()?))
+        })
+        .collect()
+}
+
+/// What a publisher said about itself: `ENGAGEMENT ...`, `SENT n` or `REFUSED ...`.
+fn publisher_status(out: &str) -> Vec<&str> {
+    out.lines()
+        .filter_map(|l| {
+            ["ENGAGEMENT ", "SENT ", "REFUSED "]
+                .iter()
+                .find_map(|marker| l.find(marker))
+                .map(|at| &l[at..])
+        })
+        .collect()
+}
+
+fn commands_inside_the_namespace() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let keystore = make_keystore(d, "NONE");
+    let ks = keystore.as_path();
+    let secured_sub = spawn(
+        d,
+        "secured_game_manager",
+        "subscribe",
+        Some((ks, "/qt_therapy/game_manager")),
+    );
+    let control_sub = spawn(d, "insecure_control", "subscribe", None);
+    std::thread::sleep(Duration::from_secs(1));
+    let publishers = [
+        spawn(
+            d,
+            "authorised",
+            "publish",
+            Some((ks, "/qt_therapy/tablet_bridge")),
+        ),
+        spawn(d, "unauthenticated", "publish", None),
+        spawn(
+            d,
+            "classifier",
+            "publish",
+            Some((ks, "/qt_therapy/engagement_classifier")),
+        ),
+        spawn(
+            d,
+            "game_manager_writer",
+            "publish",
+            Some((ks, "/qt_therapy/game_manager")),
+        ),
+    ];
+    let mut status = BTreeMap::new();
+    for p in publishers {
+        let label = p.label;
+        let out = finish(p, d);
+        status.insert(label, publisher_status(&out).join("; "));
+    }
+    let secured = received(&finish(secured_sub, d));
+    let control = received(&finish(control_sub, d));
+    for (label, said) in &status {
+        println!("publisher {label}: {said}");
+    }
+    println!("secured subscriber received: {secured:?}");
+    println!("insecure control subscriber received: {control:?}");
+
+    // (a) the authorised, secured publisher reaches the secured subscriber.
+    assert!(
+        secured.get("authorised").copied().unwrap_or(0) > 0,
+        "the tablet_bridge enclave delivered no command: {secured:?}"
+    );
+    // (b) the unauthenticated publisher does publish (the insecure control hears it) but
+    // reaches no secured subscriber.
+    assert!(
+        control.get("unauthenticated").copied().unwrap_or(0) > 0,
+        "the unauthenticated publisher did not publish at all: {control:?}"
+    );
+    assert_eq!(secured.get("unauthenticated"), None, "{secured:?}");
+    // (c) authenticated participants without publish permission deliver nothing: their own
+    // access control refuses the writer.
+    for label in ["classifier", "game_manager_writer"] {
+        assert_eq!(secured.get(label), None, "{secured:?}");
+        assert!(
+            status[label].contains("REFUSED publisher")
+                && status[label].contains("not allowed by security"),
+            "{label}: {}",
+            status[label]
+        );
+    }
+    // Engagement: only the classifier's enclave may create the writer.
+    assert!(
+        status["classifier"].contains("ENGAGEMENT allowed"),
+        "{}",
+        status["classifier"]
+    );
+    for label in ["authorised", "game_manager_writer"] {
+        assert!(
+            status[label].contains("ENGAGEMENT refused")
+                && status[label].contains("not allowed by security"),
+            "{label}: {}",
+            status[label]
+        );
+    }
+    // The insecure control hears nothing from secured writers.
+    assert_eq!(control.get("authorised"), None, "{control:?}");
+    println!("DDS SECURITY CHECKED");
+}
+
+fn unaligned_inside_the_namespace() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let keystore = make_keystore(d, "ENCRYPT");
+    let ks = keystore.as_path();
+    let sub = spawn(
+        d,
+        "raw_sub",
+        "raw_subscribe",
+        Some((ks, "/qt_therapy/game_manager")),
+    );
+    std::thread::sleep(Duration::from_secs(1));
+    // Serialized payload: 4 (encapsulation) + 4 (id) + 4 (string length) + name and NUL,
+    // so "aligned" makes 20 bytes and "unaligned" 22.
+    let aligned = spawn(
+        d,
+        "aligned",
+        "raw_publish",
+        Some((ks, "/qt_therapy/tablet_bridge")),
+    );
+    let unaligned = spawn(
+        d,
+        "unaligned",
+        "raw_publish",
+        Some((ks, "/qt_therapy/therapist_console")),
+    );
+    let sent_aligned = finish(aligned, d);
+    let sent_unaligned = finish(unaligned, d);
+    let got = received(&finish(sub, d));
+    println!(
+        "aligned: {:?}, unaligned: {:?}, received: {got:?}",
+        publisher_status(&sent_aligned),
+        publisher_status(&sent_unaligned)
+    );
+    assert!(got.get("aligned").copied().unwrap_or(0) > 0, "{got:?}");
+    if !got.contains_key("unaligned") {
+        println!("RUSTDDS BUG PRESENT: every unaligned sample lost");
+    }
+}
+
+/// A participant process: `subscribe` counts commands per session id, `publish` sends a
+/// PAUSE command tagged with its node name every 200 ms.
+fn run_role(role: &str) {
+    if let Some(raw) = role.strip_prefix("raw_") {
+        raw_rustdds_role(raw);
+        return;
+    }
+    let name = std::env::var("QT_TEST_NODE_NAME").expect("node name");
+    let options = ShellOptions {
+        params_file: Some(PathBuf::from(
+            std::env::var("QT_TEST_PARAMS").expect("params"),
+        )),
+        namespace: "/".into(),
+        service_mapping: "enhanced".into(),
+        ..Default::default()
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    runtime.block_on(async {
+        let (mut shell, NoParameters {}) = match NodeShell::start(&name, &options) {
+            Ok(s) => s,
+            Err(e) => {
+                println!("REFUSED participant: {e:#}");
+                return;
+            }
+        };
+        match role {
+            "subscribe" => {
+                let mut commands = shell.subscribe(THERAPIST_COMMAND, 1024).expect("subscribe");
+                let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+                let deadline = tokio::time::Instant::now() + LISTEN;
+                while let Ok(Some(command)) =
+                    tokio::time::timeout_at(deadline, commands.recv()).await
+                {
+                    *counts.entry(command.session_id).or_default() += 1;
+                }
+                for (tag, n) in &counts {
+                    println!("RECEIVED {tag} {n}");
+                }
+                drop(commands);
+            }
+            "publish" => {
+                // Whether this enclave may write engagement estimates (only the classifier).
+                match shell.publisher(ENGAGEMENT_ESTIMATE) {
+                    Ok(outbox) => {
+                        println!("ENGAGEMENT allowed");
+                        drop(outbox);
+                    }
+                    Err(e) => println!("ENGAGEMENT refused: {e:#}"),
+                }
+                let outbox = match shell.publisher(THERAPIST_COMMAND) {
+                    Ok(o) => o,
+                    Err(e) => {
+                        println!("REFUSED publisher: {e:#}");
+                        shell.stop().await;
+                        return;
+                    }
+                };
+                let started = tokio::time::Instant::now();
+                let mut sent = 0u64;
+                while started.elapsed() < PUBLISH {
+                    let ok = outbox.send(TherapistCommand {
+                        header: node_shell::header_now(),
+                        command: TherapistCommand::PAUSE,
+                        session_id: name.clone(),
+                        command_id: sent + 1,
+                        user_id: String::new(),
+                        user_model_cluster: -1,
+                        level: 0,
+                    });
+                    if ok {
+                        sent += 1;
+                    }
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+                println!("SENT {sent}");
+                drop(outbox);
+            }
+            other => panic!("unknown role {other}"),
+        }
+        shell.stop().await;
+    });
+}
+
+/// The same exchange with RustDDS alone (no ros2-client, no node_shell): one NoKey CDR topic
+/// carrying `RawCommand`, whose serialized length is 12 bytes plus the sender's name with its
+/// NUL, so the name's length sets the payload's alignment.
+fn raw_rustdds_role(role: &str) {
+    use rustdds::policy::Reliability;
+    use rustdds::{
+        DomainParticipantBuilder, DomainParticipantSecurityConfigFiles, QosPolicyBuilder, TopicKind,
+    };
+    #[derive(serde::Serialize, serde::Deserialize)]
+    struct RawCommand {
+        id: i32,
+        sender: String,
+    }
+    let name = std::env::var("QT_TEST_NODE_NAME").expect("node name");
+    let mut builder = DomainParticipantBuilder::new(0);
+    if let Ok(keystore) = std::env::var("ROS_SECURITY_KEYSTORE") {
+        let enclave = std::env::var("ROS_SECURITY_ENCLAVE_OVERRIDE").expect("enclave");
+        let dir = node_shell::security::enclave_dir(Path::new(&keystore), &enclave);
+        builder = builder.builtin_security(
+            DomainParticipantSecurityConfigFiles::with_ros_default_names(dir, String::new()),
+        );
+    }
+    let participant = builder.build().expect("participant");
+    let qos = QosPolicyBuilder::new()
+        .reliability(Reliability::Reliable {
+            max_blocking_time: rustdds::Duration::from_millis(100),
+        })
+        .build();
+    let topic = participant
+        .create_topic(
+            "rt/qt_therapy/therapist/command".to_string(),
+            "qt_therapy::RawCommand".to_string(),
+            &qos,
+            TopicKind::NoKey,
+        )
+        .expect("topic");
+    if role == "subscribe" {
+        let mut reader = participant
+            .create_subscriber(&qos)
+            .expect("subscriber")
+            .create_datareader_no_key_cdr::<RawCommand>(&topic, None)
+            .expect("reader");
+        let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+        let started = Instant::now();
+        while started.elapsed() < LISTEN {
+            while let Ok(Some(sample)) = reader.take_next_sample() {
+                *counts.entry(sample.into_value().sender).or_default() += 1;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        for (tag, n) in &counts {
+            println!("RECEIVED {tag} {n}");
+        }
+    } else {
+        let writer = participant
+            .create_publisher(&qos)
+            .expect("publisher")
+            .create_datawriter_no_key_cdr::<RawCommand>(&topic, None)
+            .expect("writer");
+        let started = Instant::now();
+        let mut sent = 0;
+        while started.elapsed() < PUBLISH {
+            let sample = RawCommand {
+                id: sent,
+                sender: name.clone(),
+            };
+            if writer.write(sample, None).is_ok() {
+                sent += 1;
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        println!("SENT {sent}");
+    }
+}

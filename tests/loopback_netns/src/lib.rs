@@ -1,0 +1,101 @@
+//! Running a test's DDS processes inside a private loopback-only network namespace
+//! (`tests/loopback-netns`): DDS discovery multicasts, and no packet may leave the machine.
+//! Two ways in: a bash script of processes, or the calling test itself run again inside.
+//! Where the machine cannot make a namespace (no root, no user namespaces) both say so and
+//! return None, so the test skips instead of talking to the network.
+
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// The workspace root.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Whether this machine lets us make a network namespace (root, or user namespaces).
+pub fn can_make_network_namespace() -> bool {
+    let ok = |args: &[&str]| {
+        Command::new("unshare")
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    ok(&["-n", "true"]) || ok(&["-rn", "true"])
+}
+
+fn cannot() -> bool {
+    if can_make_network_namespace() {
+        return false;
+    }
+    eprintln!(
+        "skipping: this machine cannot create a network namespace (need root or user namespaces)"
+    );
+    true
+}
+
+/// Runs `script` with bash inside one fresh namespace, in the workspace root, killed after
+/// `deadline`. None (after saying why) where namespaces cannot be made.
+pub fn run_in_loopback_netns(script: &str, deadline: Duration) -> Option<Output> {
+    if cannot() {
+        return None;
+    }
+    let child = Command::new(workspace_root().join("tests/loopback-netns"))
+        .args(["timeout", "--signal=KILL"])
+        .arg(deadline.as_secs().max(1).to_string())
+        .args(["bash", "-c", script])
+        .current_dir(workspace_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting tests/loopback-netns");
+    Some(wait_with_backstop(child, deadline))
+}
+
+/// Runs the test `name` of the current test binary again inside one fresh namespace (exact
+/// name, output shown, one thread, ignored tests included), with `env` set so the inner run
+/// knows it is inside; in the workspace root, killed after `deadline`. None (after saying why)
+/// where namespaces cannot be made.
+pub fn rerun_test_inside(name: &str, env: &[(&str, &OsStr)], deadline: Duration) -> Option<Output> {
+    if cannot() {
+        return None;
+    }
+    let mut command = Command::new(workspace_root().join("tests/loopback-netns"));
+    command
+        .args(["timeout", "--signal=KILL"])
+        .arg(deadline.as_secs().max(1).to_string())
+        .arg(std::env::current_exe().expect("the test binary"))
+        .args([
+            "--exact",
+            name,
+            "--include-ignored",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .current_dir(workspace_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    let child = command.spawn().expect("starting tests/loopback-netns");
+    Some(wait_with_backstop(child, deadline))
+}
+
+/// `timeout` inside the namespace enforces the deadline; this is the backstop.
+fn wait_with_backstop(mut child: std::process::Child, deadline: Duration) -> Output {
+    let started = Instant::now();
+    while let Ok(None) = child.try_wait() {
+        if started.elapsed() > deadline + Duration::from_secs(10) {
+            let _ = child.kill();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child
+        .wait_with_output()
+        .expect("collecting the namespace's output")
+}
