@@ -6,6 +6,7 @@
 # tablet_ws. Each runs in turn (nice -n 10); its corpus grows in corpus/TARGET (kept in the
 # repository) from the seeds in target/seeds/TARGET (generated, plus the repository's own
 # files); crashes, timeouts and out-of-memory inputs land in artifacts/TARGET/.
+# PLATEAU=600 fuzz/run.sh 3600 TARGET  stops TARGET early once 10 minutes bring no new edge.
 # MERGE=1 fuzz/run.sh 0 TARGET  minimises corpus/TARGET in place: a subset of the inputs
 # (smallest first) that still reaches every coverage edge (libFuzzer -merge=1 -use_counters=0; hit
 # counts are dropped, which keeps the kept corpora small). The seeds stay out of it: every run
@@ -18,11 +19,7 @@ targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
   targets=(msg_decode user_model_file q_table_file xgboost_model params_file launch_file tablet_ws)
 fi
-triple=$(rustc -vV | sed -n 's/^host: //p')
-export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
--Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \
--Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing -Cdebug-assertions \
--Coverflow-checks -Zsanitizer=address"
+source ./libfuzzer_flags.sh
 export CARGO_TARGET_DIR="$PWD/target"
 nice -n 10 cargo +nightly build --release --target "$triple" --bins
 bin="target/$triple/release"
@@ -45,6 +42,24 @@ max_len() { case $1 in
   user_model_file) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;
   *) echo 8192 ;; esac; }
 
+# PLATEAU=S: stop a target once its edge coverage ("cov:" in libFuzzer's status lines, not
+# the slowly growing "ft:" features) has not grown for S seconds: a plateau, written to the log.
+watch_plateau() {
+  local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov pid
+  sleep 5
+  pid=$(pgrep -n -f "release/$t " || true)
+  while [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; do
+    cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+    if [ -n "$cov" ] && [ "$cov" -gt "$best" ]; then best=$cov; since=$SECONDS; fi
+    if [ $((SECONDS - since)) -ge "$quiet" ]; then
+      echo "=== $t: plateau, $best edges, none new for $quiet s" | tee -a "$log"
+      kill -INT "$pid"
+      return 0
+    fi
+    sleep 10
+  done
+}
+
 for t in "${targets[@]}"; do
   mkdir -p "corpus/$t" "artifacts/$t" "$seeds/$t"
   if [ "${MERGE:-0}" = 1 ]; then
@@ -54,8 +69,11 @@ for t in "${targets[@]}"; do
     rm -rf "corpus/$t" && mv "target/merged/$t" "corpus/$t"
     continue
   fi
-  echo "=== $t: $secs s"
+  echo "=== $t: $secs s${PLATEAU:+, or until no new edge for $PLATEAU s}"
+  log="target/fuzz-$t.log"
   nice -n 10 "$bin/$t" -max_total_time="$secs" -max_len="$(max_len "$t")" -timeout=10 \
-    -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="artifacts/$t/" \
-    "corpus/$t" "$seeds/$t"
+    -rss_limit_mb=2048 -print_final_stats=1 -interrupt_exit_code=0 -artifact_prefix="artifacts/$t/" \
+    "corpus/$t" "$seeds/$t" 2>&1 | tee "$log" &
+  if [ -n "${PLATEAU:-}" ]; then watch_plateau "$t" "$log" "$PLATEAU"; fi
+  wait
 done

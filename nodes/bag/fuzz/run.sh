@@ -6,11 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 secs=${1:-600}
-triple=$(rustc -vV | sed -n 's/^host: //p')
-export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
--Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \
--Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing -Cdebug-assertions \
--Coverflow-checks -Zsanitizer=address"
+source ../../../fuzz/libfuzzer_flags.sh
 export CARGO_TARGET_DIR="$PWD/target"
 cargo +nightly build --release --target "$triple" --bins
 "target/$triple/release/make_seeds" corpus/read_bag
