@@ -99,3 +99,68 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
     assert!(responder_err.contains("undecodable"), "{context}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node's `/rosout` records reach a reader that joins later (the topic is transient-local),
+/// but its writer keeps a bounded number: RustDDS 0.15.1 evicts nothing from a transient-local
+/// writer that no reader has acknowledged, so without the shell's resource limit a node
+/// nobody reads `/rosout` from kept every line it ever logged (the soak's memory growth).
+#[test]
+fn rosout_reaches_a_late_reader_and_its_writer_keeps_a_bounded_history() {
+    let probe = env!("CARGO_BIN_EXE_dds_probe");
+    let dir = std::env::temp_dir().join(format!("dds_rosout_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let d = dir.display();
+    // 500 lines with nobody reading; the writer trims on its cache-cleaning timer (6 s), so
+    // the reader joins after 8 s.
+    let script = format!(
+        r#"
+        P={probe}; export ROS_LOCALHOST_ONLY=1
+        $P --params-file tests/params/dds_probe.yaml logger --lines 500 >{d}/logger.out 2>{d}/logger.err &
+        L=$!
+        for i in $(seq 200); do grep -q '"logged"' {d}/logger.out && break; sleep 0.1; done
+        sleep 8
+        $P --params-file tests/params/dds_probe.yaml rosout-reader --seconds 4 >{d}/reader.out 2>{d}/reader.err
+        R=$?
+        kill -INT $L; wait $L; LC=$?
+        echo "{{\"event\":\"exit\",\"reader\":$R,\"logger\":$LC}}"
+        "#
+    );
+    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(90)) else {
+        return;
+    };
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap_or_default();
+    let context = format!(
+        "script stdout:\n{}\nlogger:\n{}\n{}\nreader:\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        read("logger.out"),
+        read("logger.err"),
+        read("reader.err")
+    );
+    let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
+    assert_eq!(
+        exit.last()
+            .map(|e| (e["reader"].clone(), e["logger"].clone())),
+        Some((0.into(), 0.into())),
+        "{context}"
+    );
+    let lines: Vec<u32> = json_lines(&read("reader.out"))
+        .iter()
+        .filter_map(|e| {
+            e["msg"]
+                .as_str()?
+                .strip_prefix("rosout probe line ")?
+                .parse()
+                .ok()
+        })
+        .collect();
+    // The newest line arrives; at most the shell's limit (100) of the 500 are kept.
+    assert!(
+        lines.contains(&500),
+        "last line missing: {lines:?}\n{context}"
+    );
+    assert!(
+        lines.len() <= 100,
+        "{} of 500 lines re-delivered: the writer kept them all\n{context}",
+        lines.len()
+    );
+}

@@ -266,8 +266,36 @@ struct Driven {
     failed: Vec<String>,
     /// (sessions done, node -> usage)
     samples: Vec<(u32, BTreeMap<String, Usage>)>,
-    q_updates_before: Option<u64>,
+    q_updates_before: u64,
     wall: Duration,
+}
+
+impl Driven {
+    /// Nothing driven yet; the policy's update count as the soak starts.
+    fn starting(out: &Path) -> Self {
+        Driven {
+            sessions: Vec::new(),
+            started: Vec::new(),
+            failed: Vec::new(),
+            samples: Vec::new(),
+            // A missing file: the policy has not learned yet (a new table starts at 0 updates).
+            q_updates_before: q_updates(out).unwrap_or(0),
+            wall: Duration::ZERO,
+        }
+    }
+}
+
+/// `therapist run-session` for the simulated child of cluster 0, as every soak session runs it.
+fn run_session_command(bin: &Path, root: &Path, session: &str, timeout_s: u64) -> Command {
+    let mut command = Command::new(bin.join("therapist"));
+    command
+        .args(["run-session", "--user", "sim-child-soak", "--cluster", "0"])
+        .args(["--session", session])
+        .args(["--timeout", &timeout_s.to_string()])
+        .current_dir(root)
+        .env("ROS_LOCALHOST_ONLY", "1")
+        .stdin(Stdio::null());
+    command
 }
 
 fn q_updates(out: &Path) -> Option<u64> {
@@ -323,24 +351,11 @@ fn drive_one_console(
 ) -> anyhow::Result<Driven> {
     use std::io::BufRead as _;
     wait_for_nodes(stderr_log)?;
-    let mut driven = Driven {
-        sessions: Vec::new(),
-        started: Vec::new(),
-        failed: Vec::new(),
-        samples: Vec::new(),
-        q_updates_before: Some(q_updates(out).unwrap_or(0)),
-        wall: Duration::ZERO,
-    };
+    let mut driven = Driven::starting(out);
     let base = format!("soak-{run_id}");
     let soak_started = Instant::now();
-    let mut console = Command::new(bin.join("therapist"))
-        .args(["run-session", "--user", "sim-child-soak", "--cluster", "0"])
-        .args(["--session", &base])
+    let mut console = run_session_command(bin, root, &base, cli.session_timeout)
         .args(["--sessions", &cli.sessions.to_string()])
-        .args(["--timeout", &cli.session_timeout.to_string()])
-        .current_dir(root)
-        .env("ROS_LOCALHOST_ONLY", "1")
-        .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(std::fs::File::create(out.join("console.stderr.log"))?)
         .spawn()
@@ -404,16 +419,7 @@ fn drive(
     let sample = |done: u32, samples: &mut Vec<(u32, BTreeMap<String, Usage>)>| {
         samples.push((done, sample_nodes(stderr_log)));
     };
-    let mut driven = Driven {
-        sessions: Vec::new(),
-        started: Vec::new(),
-        failed: Vec::new(),
-        samples: Vec::new(),
-        q_updates_before: None,
-        wall: Duration::ZERO,
-    };
-    // A missing file: the policy has not learned yet (a new table starts at 0 updates).
-    driven.q_updates_before = Some(q_updates(out).unwrap_or(0));
+    let mut driven = Driven::starting(out);
     let soak_started = Instant::now();
     let mut consecutive_failures = 0;
     for k in 1..=cli.sessions {
@@ -430,13 +436,7 @@ fn drive(
         }
         let session = format!("soak-{run_id}-{k:05}");
         let t0 = Instant::now();
-        let output = Command::new(bin.join("therapist"))
-            .args(["run-session", "--user", "sim-child-soak", "--cluster", "0"])
-            .args(["--session", &session])
-            .args(["--timeout", &cli.session_timeout.to_string()])
-            .current_dir(root)
-            .env("ROS_LOCALHOST_ONLY", "1")
-            .stdin(Stdio::null())
+        let output = run_session_command(bin, root, &session, cli.session_timeout)
             .output()
             .context("running therapist run-session")?;
         let took = t0.elapsed();
@@ -751,9 +751,9 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
         .iter()
         .filter(|r| ran.contains(r.message.session_id.as_str()))
         .count() as u64;
-    match (driven.q_updates_before, q_updates(out)) {
-        (Some(before), Some(after)) => {
-            let learned = after.saturating_sub(before);
+    match q_updates(out) {
+        Some(after) => {
+            let learned = after.saturating_sub(driven.q_updates_before);
             println!(
                 "policy Q-table updates during the soak: {learned} (sequence results: {published})"
             );
@@ -761,7 +761,7 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
                 ok = false;
             }
         }
-        _ => {
+        None => {
             println!("policy Q-table file not found: no update count");
             ok = false;
         }

@@ -1,6 +1,8 @@
 //! A DDS peer for the cross-process tests. `responder` subscribes to the tablet answers and
 //! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable) and
-//! calls the service. Each prints one JSON line per event, so a test can check what crossed.
+//! calls the service; `logger` logs lines (to `/rosout` through the shell) and `rosout-reader`
+//! prints the `/rosout` records it receives. Each prints one JSON line per event, so a test
+//! can check what crossed.
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -27,6 +29,17 @@ enum Role {
         #[arg(long, default_value_t = 5)]
         count: u32,
     },
+    /// Log `lines` INFO lines "rosout probe line N", print `logged`, then idle until SIGINT.
+    Logger {
+        #[arg(long, default_value_t = 500)]
+        lines: u32,
+    },
+    /// Print every `/rosout` record received (a late-joining, transient-local reader) for
+    /// `seconds`, then exit.
+    RosoutReader {
+        #[arg(long, default_value_t = 3)]
+        seconds: u64,
+    },
 }
 
 fn emit(event: serde_json::Value) {
@@ -40,6 +53,14 @@ async fn main() -> anyhow::Result<()> {
     match cli.role {
         Role::Responder => responder(&mut shell).await?,
         Role::Caller { count } => caller(&mut shell, count).await?,
+        Role::Logger { lines } => {
+            for i in 1..=lines {
+                tracing::info!("rosout probe line {i}");
+            }
+            emit(serde_json::json!({"event": "logged", "lines": lines}));
+            shell.shutdown_signal().await;
+        }
+        Role::RosoutReader { seconds } => rosout_reader(&mut shell, seconds).await?,
     }
     shell.stop().await;
     Ok(())
@@ -178,5 +199,35 @@ async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
         )
         .await?;
     emit(serde_json::json!({"event": "response", "ok": bad.ok, "error": bad.error}));
+    Ok(())
+}
+
+async fn rosout_reader(shell: &mut NodeShell, seconds: u64) -> anyhow::Result<()> {
+    use futures::StreamExt as _;
+    let qos = node_shell::qos_profile(qt_therapy_msgs::topics::QosKind::Durable)
+        .history(ros2_client::qos::History::KeepLast { depth: 10_000 });
+    let node = shell.node_mut();
+    let topic = node
+        .create_topic(
+            &ros2_client::Name::new("/", "rosout").map_err(|e| anyhow::anyhow!("{e:?}"))?,
+            ros2_client::MessageTypeName::new("rcl_interfaces", "Log"),
+            &qos,
+        )
+        .context("the /rosout topic")?;
+    let reader = node
+        .create_subscription::<ros2_client::log::Log>(&topic, Some(qos))
+        .context("a /rosout subscription")?;
+    let records = reader.async_stream();
+    tokio::pin!(records);
+    let until = tokio::time::sleep(Duration::from_secs(seconds));
+    tokio::pin!(until);
+    loop {
+        tokio::select! {
+            _ = &mut until => break,
+            Some(Ok((log, _))) = records.next() => {
+                emit(serde_json::json!({"event": "rosout", "name": log.name, "msg": log.msg}));
+            }
+        }
+    }
     Ok(())
 }

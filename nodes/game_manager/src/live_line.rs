@@ -3,6 +3,11 @@
 //! line per scored sequence.
 
 use qt_therapy_msgs::{Decision, SequenceResult};
+use std::time::Duration;
+
+/// How long a listener waits for results after the FINISHED state: results travel on their
+/// own topic, so the last one may arrive just after the state that ends the session.
+pub const LAST_RESULT_GRACE: Duration = Duration::from_secs(2);
 
 const ACTION_NAMES: [&str; 5] = ["level 1", "level 2", "level 3", "encourage", "challenge"];
 const FEEDBACK_NAMES: [&str; 3] = ["none", "encouraging", "challenging"];

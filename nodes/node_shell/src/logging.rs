@@ -2,7 +2,8 @@
 //! once the node exists, the same events at INFO and above to `/rosout`, so `ros2 topic echo
 //! /rosout` and rqt_console show our nodes beside the robot's own.
 
-use ros2_client::{NodeLoggingHandle, RosoutRaw};
+use ros2_client::Publisher;
+use ros2_client::log::Log;
 use std::sync::{Arc, OnceLock};
 use tracing::field::{Field, Visit};
 use tracing::{Event, Level, Subscriber};
@@ -12,11 +13,11 @@ use tracing_subscriber::{EnvFilter, Layer};
 
 /// Where the `/rosout` layer sends events once the node has been created.
 #[derive(Clone, Default)]
-pub struct RosoutSink(Arc<OnceLock<NodeLoggingHandle>>);
+pub struct RosoutSink(Arc<OnceLock<Publisher<Log>>>);
 
 impl RosoutSink {
-    pub fn attach(&self, handle: NodeLoggingHandle) {
-        let _ = self.0.set(handle);
+    pub fn attach(&self, publisher: Publisher<Log>) {
+        let _ = self.0.set(publisher);
     }
 }
 
@@ -62,21 +63,21 @@ impl<S: Subscriber> Layer<S> for RosoutLayer {
             Level::INFO => ros2_client::log::LogLevel::Info,
             _ => return,
         };
-        let Some(handle) = self.sink.0.get() else {
+        let Some(publisher) = self.sink.0.get() else {
             return;
         };
         let mut text = MessageText::default();
         event.record(&mut text);
-        let stamp = ros2_client::builtin_interfaces::Time::now();
-        handle.rosout_raw(
-            stamp,
-            level,
-            &self.node_name,
-            &text.0,
-            meta.file().unwrap_or(""),
-            meta.module_path().unwrap_or(""),
-            meta.line().unwrap_or(0),
-        );
+        // A failed publish cannot be logged from inside the logger; stderr has the line anyway.
+        let _ = publisher.publish(Log {
+            stamp: ros2_client::builtin_interfaces::Time::now(),
+            level: level as u8,
+            name: self.node_name.clone(),
+            msg: text.0,
+            file: meta.file().unwrap_or("").to_string(),
+            function: meta.module_path().unwrap_or("").to_string(),
+            line: meta.line().unwrap_or(0),
+        });
     }
 }
 

@@ -111,6 +111,60 @@ pub fn qos_profile(kind: QosKind) -> QosProfile {
     }
 }
 
+/// Backstop on the `/rosout` records a node's writer holds (ROS 2's rosout depth).
+const ROSOUT_BACKSTOP: i32 = 1000;
+
+/// The node's `/rosout` publisher, and a task that reads the node's own records back.
+///
+/// Why the reader: RustDDS 0.15.1 trims a reliable writer's history to its depth only after
+/// every matched reader has acknowledged; with no reader at all it trims nothing and keeps
+/// every sample up to its 8,192-sample backstop. `/rosout` is
+/// transient-local and usually unread, so each node kept every line it ever logged: the
+/// soak's steady memory growth (heaptrack: ~6 kB per session in the tablet bridge, all in
+/// the rosout writer). With our own reader acknowledging, the writer keeps its depth (the
+/// newest record, for a late rqt_console), and [`ROSOUT_BACKSTOP`] caps it if that reader
+/// ever falls behind. QoS otherwise as ros2-client's rosout writer.
+fn rosout(
+    context: &Context,
+    node: &mut Node,
+) -> anyhow::Result<(
+    ros2_client::Publisher<ros2_client::log::Log>,
+    tokio::task::JoinHandle<()>,
+)> {
+    use futures::StreamExt as _;
+    use ros2_client::builtin_topics::rosout;
+    let limits = rustdds::policy::ResourceLimits {
+        max_samples: ROSOUT_BACKSTOP,
+        max_instances: 1,
+        max_samples_per_instance: ROSOUT_BACKSTOP,
+    };
+    let qos = rustdds::QosPolicyBuilder::new()
+        .resource_limits(limits)
+        .build()
+        .modify_by(&rosout::QOS);
+    let topic = context
+        .domain_participant()
+        .create_topic(
+            rosout::TOPIC_NAME.to_string(),
+            rosout::TYPE_NAME.to_string(),
+            &qos,
+            rustdds::TopicKind::NoKey,
+        )
+        .context("creating the /rosout topic")?;
+    let publisher = node
+        .create_publisher(&topic, None)
+        .context("creating the /rosout publisher")?;
+    let own_records = node
+        .create_subscription::<ros2_client::log::Log>(&topic, None)
+        .context("creating the /rosout reader")?;
+    let drain = tokio::spawn(async move {
+        let records = own_records.async_stream();
+        tokio::pin!(records);
+        while records.next().await.is_some() {}
+    });
+    Ok((publisher, drain))
+}
+
 fn service_qos() -> QosProfile {
     qos_profile(QosKind::Reliable).history(History::KeepLast { depth: 10 })
 }
@@ -198,15 +252,16 @@ impl NodeShell {
             )
         })?;
         let mut node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(true))
+            .new_node(node_name, NodeOptions::new().enable_rosout(false))
             .with_context(|| format!("creating node {name}"))?;
+        let (rosout, rosout_drain) = rosout(&context, &mut node)?;
         let spinner = node.spinner().context("starting the node's spinner")?;
         let spinner_task = tokio::spawn(async move {
             if let Err(e) = spinner.spin().await {
                 tracing::error!("ros2-client spinner stopped: {e:?}");
             }
         });
-        sink.attach(node.logging_handle());
+        sink.attach(rosout);
         let shutdown = spawn_signal_listener()?;
         tracing::info!(
             node = %name,
@@ -222,7 +277,7 @@ impl NodeShell {
             service_mapping,
             drops: Arc::new(DropLog::default()),
             shutdown,
-            tasks: vec![spinner_task],
+            tasks: vec![spinner_task, rosout_drain],
             _context: context,
         };
         shell.start_heartbeat()?;

@@ -5,7 +5,7 @@
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
-use game_manager::live_line::{reason_from_messages, sequence_line};
+use game_manager::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
 use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
 use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND};
 use qt_therapy_msgs::{Decision, GameState, TherapistCommand};
@@ -92,8 +92,7 @@ async fn main() -> anyhow::Result<()> {
         match cli.command {
             Command::Start(a) => {
                 let c = start_command(&a, Some(&mut states)).await?;
-                send(&commands, &shell, c).await?;
-                0
+                send(&commands, &shell, &mut states, c).await?
             }
             Command::RunSession {
                 start,
@@ -108,7 +107,10 @@ async fn main() -> anyhow::Result<()> {
                         c.session_id = format!("{}-{k:05}", c.session_id);
                     }
                     let session = c.session_id.clone();
-                    send(&commands, &shell, c).await?;
+                    code = send(&commands, &shell, &mut states, c).await?;
+                    if code != 0 {
+                        break;
+                    }
                     println!(
                         "session {session} started for user {} (cluster {})",
                         start.user, start.cluster
@@ -132,6 +134,7 @@ async fn main() -> anyhow::Result<()> {
                 send(
                     &commands,
                     &shell,
+                    &mut states,
                     command(TherapistCommand::PAUSE, &s.session),
                 )
                 .await?
@@ -140,6 +143,7 @@ async fn main() -> anyhow::Result<()> {
                 send(
                     &commands,
                     &shell,
+                    &mut states,
                     command(TherapistCommand::RESUME, &s.session),
                 )
                 .await?
@@ -148,6 +152,7 @@ async fn main() -> anyhow::Result<()> {
                 send(
                     &commands,
                     &shell,
+                    &mut states,
                     command(TherapistCommand::STOP, &s.session),
                 )
                 .await?
@@ -156,6 +161,7 @@ async fn main() -> anyhow::Result<()> {
                 send(
                     &commands,
                     &shell,
+                    &mut states,
                     command(TherapistCommand::EMERGENCY_STOP, &s.session),
                 )
                 .await?
@@ -163,7 +169,7 @@ async fn main() -> anyhow::Result<()> {
             Command::Override { session, level } => {
                 let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &session.session);
                 c.level = level;
-                send(&commands, &shell, c).await?
+                send(&commands, &shell, &mut states, c).await?
             }
         }
     };
@@ -171,10 +177,22 @@ async fn main() -> anyhow::Result<()> {
     std::process::exit(code);
 }
 
-/// Sends one command once the game manager listens; returns the exit code.
+/// How long the console waits for the game manager to confirm a command before sending it
+/// again, and how many times it sends one.
+const CONFIRM_WAIT: Duration = Duration::from_secs(2);
+const SENDS: u32 = 3;
+
+/// Sends one command once a reader listens, then waits until the game manager confirms it: a
+/// GameState naming it (`command <id>` in its status; for START, the new session's first
+/// state). Confirmation is needed because a reliable sample still misses a reader that matched
+/// after it was sent (the recorder may match first), or when this process exits before it was
+/// delivered: an override was once lost that way. An unconfirmed command is sent again with
+/// the same id, which the game manager never carries out twice. Returns the exit code: 0
+/// carried out, 4 refused (the reason is printed).
 async fn send(
     commands: &Outbox<TherapistCommand>,
     shell: &NodeShell,
+    states: &mut tokio::sync::mpsc::Receiver<GameState>,
     c: TherapistCommand,
 ) -> anyhow::Result<i32> {
     if !commands
@@ -183,8 +201,34 @@ async fn send(
     {
         bail!("no game manager is listening on {}", THERAPIST_COMMAND.name);
     }
-    commands.send(c);
-    Ok(0)
+    let tag = format!("command {}", c.command_id);
+    for attempt in 1..=SENDS {
+        commands.send(c.clone());
+        let until = tokio::time::Instant::now() + CONFIRM_WAIT;
+        while let Ok(Some(s)) = tokio::time::timeout_at(until, states.recv()).await {
+            let started = c.command == TherapistCommand::START
+                && s.session_id == c.session_id
+                && s.phase != GameState::IDLE;
+            if !started && !s.status.contains(&tag) {
+                continue;
+            }
+            // A repeat of a command carried out before is refused as a duplicate: done.
+            if s.status.starts_with("rejected") && !s.status.contains("duplicate command id") {
+                println!("{}", s.status);
+                return Ok(4);
+            }
+            return Ok(0);
+        }
+        if attempt < SENDS {
+            tracing::warn!(
+                "{tag} not confirmed by the game manager within {CONFIRM_WAIT:?}: sending it again"
+            );
+        }
+    }
+    bail!(
+        "the game manager did not confirm {tag} (session {:?}) after {SENDS} sends",
+        c.session_id
+    )
 }
 
 /// The START command, once the game manager is free. `states` None: it is known to be (the
@@ -279,9 +323,7 @@ async fn follow(
                 }
                 match s.phase {
                     GameState::FINISHED => {
-                        // Results travel on their own topic: the last one may arrive just
-                        // after the state that ends the session.
-                        let grace = tokio::time::Instant::now() + Duration::from_secs(2);
+                        let grace = tokio::time::Instant::now() + LAST_RESULT_GRACE;
                         while results_seen < usize::from(s.sequence_index) {
                             match tokio::time::timeout_at(grace, results.recv()).await {
                                 Ok(Some(r)) if r.session_id == session => {

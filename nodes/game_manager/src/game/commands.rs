@@ -52,7 +52,7 @@ impl GameManager {
             // Silence first; explain afterwards.
             self.end_session(
                 SessionEnd::EmergencyStopped,
-                "emergency stop by the therapist",
+                &format!("emergency stop by the therapist (command {})", c.command_id),
                 now,
             );
             if let Some(last) = out_of_order {
@@ -66,11 +66,13 @@ impl GameManager {
         self.log(LogLevel::Info, format!("accepted {what}"));
         match c.command {
             TherapistCommand::PAUSE => self.pause(c.command_id, now),
-            TherapistCommand::RESUME => self.resume(now),
-            TherapistCommand::STOP => {
-                self.end_session(SessionEnd::Stopped, "stopped by the therapist", now)
-            }
-            _ => self.override_level(c.level, now),
+            TherapistCommand::RESUME => self.resume(c.command_id, now),
+            TherapistCommand::STOP => self.end_session(
+                SessionEnd::Stopped,
+                &format!("stopped by the therapist (command {})", c.command_id),
+                now,
+            ),
+            _ => self.override_level(c.level, c.command_id, now),
         }
     }
 
@@ -257,7 +259,7 @@ impl GameManager {
         }
     }
 
-    fn resume(&mut self, now: i64) {
+    fn resume(&mut self, command_id: u64, now: i64) {
         let paused_for = self
             .session
             .as_mut()
@@ -269,11 +271,13 @@ impl GameManager {
         );
         if self.paused() {
             // publish_state names the lost nodes.
-            self.status = "resumed by the therapist; still held until the node is back".into();
+            self.status = format!(
+                "resumed by the therapist (command {command_id}); still held until the node is back"
+            );
             self.publish_state(now);
             return;
         }
-        self.continue_play("resumed", now);
+        self.continue_play(&format!("resumed (command {command_id})"), now);
     }
 
     /// Goes on where a pause or a hold stopped; `why` starts the status.
@@ -300,7 +304,7 @@ impl GameManager {
         }
     }
 
-    fn override_level(&mut self, level: u8, now: i64) {
+    fn override_level(&mut self, level: u8, command_id: u64, now: i64) {
         let Ok(level) = Level::new(level.into()) else {
             return;
         };
@@ -312,12 +316,14 @@ impl GameManager {
             LogLevel::Info,
             format!("sequence {target} set to {level} by the therapist"),
         );
+        // Every accepted command's first state names it: the console waits for that.
+        self.status = format!(
+            "next sequence ({target}) set to {level} by the therapist (command {command_id})"
+        );
+        self.publish_state(now);
         if self.phase == Phase::Deciding {
             self.apply_override(now);
             self.maybe_present(now);
-        } else {
-            self.status = format!("next sequence ({target}) set to {level} by the therapist");
-            self.publish_state(now);
         }
     }
 }

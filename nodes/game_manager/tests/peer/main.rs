@@ -186,9 +186,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                     overridden = true;
                 }
                 if s.phase == GameState::FINISHED {
-                    // Results travel on their own topic, so the last one may arrive after the
-                    // state that ends the session: listen a little longer.
-                    let grace = tokio::time::sleep(Duration::from_secs(2));
+                    let grace = tokio::time::sleep(game_manager::live_line::LAST_RESULT_GRACE);
                     tokio::pin!(grace);
                     loop {
                         tokio::select! {

@@ -259,3 +259,33 @@ fn bad_commands_are_rejected_with_a_reason_and_the_session_goes_on() {
     expect_rejected(&mut h, cmd(C::START, "s", 100), "already used");
     expect_rejected(&mut h, cmd(C::STOP, "s", 101), "already ended (finished)");
 }
+
+#[test]
+fn every_command_is_confirmed_by_a_state_that_names_it() {
+    // The console waits for such a state before it exits (and sends the command again if it
+    // sees none), so each accepted or refused command must publish one, in every phase.
+    let names_it = |out: &[Output], id: u64| {
+        out.iter()
+            .any(|o| matches!(o, Output::State(s) if s.status.contains(&format!("command {id}"))))
+    };
+    let mut h = harness();
+    h.start("s");
+    h.run_until(T0 + 15 * S);
+    assert_eq!(h.last_state().phase, GameState::WAITING_FOR_ANSWER);
+    let out = h.feed(cmd(C::PAUSE, "s", 2));
+    assert!(names_it(&out, 2), "pause: {out:?}");
+    let out = h.feed(override_to(3, "s", 3));
+    assert!(names_it(&out, 3), "override while paused: {out:?}");
+    let out = h.feed(cmd(C::RESUME, "s", 4));
+    assert!(names_it(&out, 4), "resume: {out:?}");
+    let out = h.feed(cmd(C::RESUME, "s", 4));
+    assert!(names_it(&out, 4), "a repeat is refused by name: {out:?}");
+    // While deciding sequence 2 (the override applies at once).
+    h.run_until_true(60.0, |h| h.last_state().phase == GameState::DECIDING);
+    let out = h.feed(override_to(1, "s", 5));
+    assert!(names_it(&out, 5), "override while deciding: {out:?}");
+    let out = h.feed(cmd(C::STOP, "s", 6));
+    assert!(names_it(&out, 6), "stop: {out:?}");
+    let out = h.feed(cmd(C::EMERGENCY_STOP, "s", 7));
+    assert!(names_it(&out, 7), "emergency stop after the end: {out:?}");
+}

@@ -252,7 +252,7 @@ fn a_therapist_resume_during_a_hold_leaves_the_hold_to_the_node() {
     assert_eq!(state.phase, GameState::PAUSED);
     assert_eq!(
         state.status,
-        "node lost: behaviour_policy; resumed by the therapist; still held until the node is back"
+        "node lost: behaviour_policy; resumed by the therapist (command 3); still held until the node is back"
     );
     let resumed_at = h.log.len();
     h.run_until(T0 + 30 * S - 1);
