@@ -4,7 +4,7 @@
 #   fuzz/run.sh [SECONDS_PER_TARGET] [TARGET...]      (default 300 s, every target)
 # Targets: msg_decode user_model_file q_table_file xgboost_model params_file launch_file
 # tablet_ws. Each runs in turn (nice -n 10); its corpus grows in corpus/TARGET (kept in the
-# repository) from the seeds in target/seeds/TARGET (generated, plus the repository's own
+# repository) from the seeds in target/seeds.<pid>/TARGET (generated, plus the repository's own
 # files); crashes, timeouts and out-of-memory inputs land in artifacts/TARGET/.
 # PLATEAU=600 fuzz/run.sh 3600 TARGET  stops TARGET early once 10 minutes bring no new edge.
 # MERGE=1 fuzz/run.sh 0 TARGET  minimises corpus/TARGET in place: a subset of the inputs
@@ -24,9 +24,10 @@ export CARGO_TARGET_DIR="$PWD/target"
 nice -n 10 cargo +nightly build --release --target "$triple" --bins
 bin="target/$triple/release"
 
-# Generated seeds, then the repository's real files of each format.
-seeds=target/seeds
-rm -rf "$seeds"
+# Generated seeds, then the repository's real files of each format: one directory per run, so
+# runs side by side (two targets on two cores) never delete each other's seeds.
+seeds=target/seeds.$$
+trap 'rm -rf "$seeds"' EXIT
 "$bin/make_seeds" "$seeds"
 add() { local dir="$seeds/$1"; shift; mkdir -p "$dir"; for f in "$@"; do
   [ -f "$f" ] && cp "$f" "$dir/$(echo "${f#../}" | tr / _)"; done; return 0; }

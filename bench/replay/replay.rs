@@ -11,9 +11,12 @@
 //!                result from CDR in log-time order, classify each frame and aggregate per
 //!                second, decide each recorded state and learn from each result;
 //!   cores only:  the same on messages decoded beforehand.
-//! Reference: real time (3,600 s). There is no naive replay to run beside it in this process:
-//! the per-frame model against Python xgboost is bench/engagement_classifier/bench_inference.py,
-//! the policy's Q-learning against NumPy is bench/behaviour_policy/bench_policy.py.
+//! References: real time (3,600 s), and, measured in the same run, Python's `mcap` +
+//! `mcap-ros2-support` only decoding the same frames, decisions and results from the same file
+//! (bench/replay/decode_reference.py, once; skipped with a note where Python lacks them): a
+//! Python replay would do at least that. The per-frame model against Python xgboost is
+//! bench/engagement_classifier/bench_inference.py, the policy's Q-learning against NumPy is
+//! bench/behaviour_policy/bench_policy.py.
 
 use bag::{BagReader, BagWriter, Compression, Stamp, WriterOptions};
 use behaviour_policy::messages::transition;
@@ -258,5 +261,30 @@ fn main() -> anyhow::Result<()> {
         best_cores * 1e9 / frames as f64
     );
     println!("best of {REPEATS}, one thread; target >= 1000x real time");
+    let script = root().join("bench/replay/decode_reference.py");
+    match std::process::Command::new("python3")
+        .arg(&script)
+        .arg(&hour)
+        .output()
+    {
+        Ok(out) if out.status.success() => {
+            let line: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+            let seconds = line["seconds"].as_f64().unwrap_or(f64::NAN);
+            println!(
+                "Python mcap-ros2, decoding only ({} messages): {seconds:.3} s; bag + cores \
+                 is {:.1}x faster while also classifying, deciding and learning",
+                line["messages"],
+                seconds / best_full
+            );
+        }
+        Ok(out) => println!(
+            "Python reference skipped (pip install mcap mcap-ros2-support): {}",
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        ),
+        Err(e) => println!("Python reference skipped: python3 not runnable: {e}"),
+    }
     Ok(())
 }
