@@ -226,10 +226,19 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
             .spawn()
             .context("starting the launcher")?,
     };
+    let driving = Driving {
+        cli,
+        bin: &bin,
+        root: &root,
+        out: &out,
+        stderr_log: &stderr_log,
+        run_id,
+        every,
+    };
     let result = if cli.one_console {
-        drive_one_console(cli, &bin, &root, &out, &stderr_log, run_id, every)
+        drive_one_console(&driving)
     } else {
-        drive(cli, &bin, &root, &out, &stderr_log, run_id, every)
+        drive(&driving)
     };
     let launch_exit = launch.stop()?;
     let driven = result?;
@@ -339,16 +348,29 @@ fn progress(k: u32, total: u32, session: &str, ok: bool, took: Duration, since: 
     );
 }
 
-/// All sessions from one console process: its output is followed line by line.
-fn drive_one_console(
-    cli: &Cli,
-    bin: &Path,
-    root: &Path,
-    out: &Path,
-    stderr_log: &Path,
+/// What both ways of driving the sessions work with.
+#[derive(Clone, Copy)]
+struct Driving<'a> {
+    cli: &'a Cli,
+    bin: &'a Path,
+    root: &'a Path,
+    out: &'a Path,
+    stderr_log: &'a Path,
     run_id: u32,
     every: u32,
-) -> anyhow::Result<Driven> {
+}
+
+/// All sessions from one console process: its output is followed line by line.
+fn drive_one_console(d: &Driving) -> anyhow::Result<Driven> {
+    let Driving {
+        cli,
+        bin,
+        root,
+        out,
+        stderr_log,
+        run_id,
+        every,
+    } = *d;
     use std::io::BufRead as _;
     wait_for_nodes(stderr_log)?;
     let mut driven = Driven::starting(out);
@@ -406,15 +428,16 @@ fn drive_one_console(
     Ok(driven)
 }
 
-fn drive(
-    cli: &Cli,
-    bin: &Path,
-    root: &Path,
-    out: &Path,
-    stderr_log: &Path,
-    run_id: u32,
-    every: u32,
-) -> anyhow::Result<Driven> {
+fn drive(d: &Driving) -> anyhow::Result<Driven> {
+    let Driving {
+        cli,
+        bin,
+        root,
+        out,
+        stderr_log,
+        run_id,
+        every,
+    } = *d;
     wait_for_nodes(stderr_log)?;
     let sample = |done: u32, samples: &mut Vec<(u32, BTreeMap<String, Usage>)>| {
         samples.push((done, sample_nodes(stderr_log)));
