@@ -202,31 +202,8 @@ impl QTableFile {
                 .collect(),
         };
         let text = serde_json::to_string_pretty(&stored).map_err(|e| bad(e.to_string()))?;
-        let dir = path
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        std::fs::create_dir_all(dir).map_err(|e| bad(e.to_string()))?;
-        let mut tmp = readable_temp_file(dir).map_err(|e| bad(e.to_string()))?;
-        use std::io::Write;
-        tmp.write_all(text.as_bytes())
-            .and_then(|()| tmp.as_file().sync_all())
-            .map_err(|e| bad(e.to_string()))?;
-        tmp.persist(path).map_err(|e| bad(e.error.to_string()))?;
-        Ok(())
+        atomic_file::write(path, text.as_bytes()).map_err(|e| bad(e.to_string()))
     }
-}
-
-/// A temporary file for an atomic write, readable by all like a normally created file
-/// (tempfile's default 0600 would hide Q-tables and curves from other users' tools).
-pub(crate) fn readable_temp_file(dir: &Path) -> std::io::Result<tempfile::NamedTempFile> {
-    let mut builder = tempfile::Builder::new();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    builder.tempfile_in(dir)
 }
 
 #[cfg(test)]

@@ -1,24 +1,8 @@
 //! The experiments' outputs in words and numbers: every curve as CSV (one row per configuration
-//! and epoch), the last-epoch table, and atomic file writes (temp file + rename).
+//! and epoch), and the last-epoch table.
 
 use crate::experiments::EpochMetrics;
 use crate::grid::Curve;
-use std::path::Path;
-
-/// Writes `bytes` to `path` through a temporary file in the same directory and a rename.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)?;
-    let mut tmp = crate::q_table_file::readable_temp_file(dir)?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
-}
 
 /// Every curve: config, cluster, reward, mode, transfer_from, epoch, then mean and std of each
 /// metric (score, engagement, ratio, return, v, explored).
@@ -161,20 +145,5 @@ mod tests {
         assert_eq!(rise_epoch(&curve(&falling), 0.9), Some(8));
         assert_eq!(rise_epoch(&curve(&[5.0, 5.3, 4.9, 5.2]), 0.9), None);
         assert_eq!(rise_epoch(&curve(&[]), 0.9), None);
-    }
-
-    #[test]
-    fn atomic_write_replaces_whole_files() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let p = dir.path().join("sub/curves.csv");
-        write_atomic(&p, b"one").expect("writes");
-        write_atomic(&p, b"two").expect("writes");
-        assert_eq!(std::fs::read(&p).expect("read"), b"two");
-        assert_eq!(
-            std::fs::read_dir(p.parent().expect("dir"))
-                .expect("ls")
-                .count(),
-            1
-        );
     }
 }

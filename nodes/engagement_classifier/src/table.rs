@@ -287,7 +287,7 @@ pub fn write_labelled_csv(path: &Path, table: &FeatureTable) -> std::io::Result<
         }
         out.push('\n');
     }
-    crate::atomic_write(path, out.as_bytes())
+    atomic_file::write(path, out.as_bytes())
 }
 
 #[cfg(test)]

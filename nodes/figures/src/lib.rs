@@ -88,19 +88,10 @@ pub fn write_svg_and_png(stem: &Path, svg: &str) -> Result<(PathBuf, PathBuf), F
 }
 
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FigureError> {
-    let io = |source| FigureError::Io {
+    atomic_file::write(path, bytes).map_err(|source| FigureError::Io {
         path: path.to_path_buf(),
         source,
-    };
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(io)?;
-    }
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
-    ));
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    })
 }
 
 #[cfg(test)]

@@ -205,18 +205,13 @@ impl SessionFiles {
     pub fn write_summary(&mut self, summary: &SessionSummary) -> Result<PathBuf, SessionFileError> {
         let stem = self.stem(&summary.session_id)?;
         let path = self.dir.join(format!("{stem}.summary.json"));
-        let tmp = self.dir.join(format!(".{stem}.summary.json.tmp"));
-        let text =
+        let mut text =
             serde_json::to_string_pretty(summary).map_err(|source| SessionFileError::Encode {
                 path: path.clone(),
                 source,
             })?;
-        let mut f = File::create(&tmp).map_err(write_err(&tmp))?;
-        f.write_all(text.as_bytes()).map_err(write_err(&tmp))?;
-        f.write_all(b"\n").map_err(write_err(&tmp))?;
-        f.sync_all().map_err(write_err(&tmp))?;
-        std::fs::rename(&tmp, &path).map_err(write_err(&path))?;
-        sync_dir(&self.dir)?;
+        text.push('\n');
+        atomic_file::write(&path, text.as_bytes()).map_err(write_err(&path))?;
         self.current = None;
         Ok(path)
     }

@@ -33,9 +33,8 @@ fn main() -> anyhow::Result<()> {
     let output = cli
         .output
         .unwrap_or_else(|| cli.bag.with_file_name("report.html"));
-    let tmp = output.with_extension("html.tmp");
-    std::fs::write(&tmp, html).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, &output).with_context(|| format!("writing {}", output.display()))?;
+    atomic_file::write(&output, html.as_bytes())
+        .with_context(|| format!("writing {}", output.display()))?;
     let s = log.summary()?;
     println!(
         "session {}: {} sequences, score {} of {}, report {}",

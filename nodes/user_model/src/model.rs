@@ -494,23 +494,7 @@ impl UserModelSet {
             reason,
         };
         let text = serde_json::to_string_pretty(&self.file).map_err(|e| bad(e.to_string()))?;
-        let dir = path
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        std::fs::create_dir_all(dir).map_err(|e| bad(e.to_string()))?;
-        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| bad(e.to_string()))?;
-        use std::io::Write;
-        tmp.write_all(text.as_bytes())
-            .and_then(|()| tmp.write_all(b"\n"))
-            .and_then(|()| tmp.as_file().sync_all())
-            .map_err(|e| bad(e.to_string()))?;
-        // The temporary file is private; the model is meant to be read by every node.
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| bad(e.to_string()))?;
-        tmp.persist(path).map_err(|e| bad(e.error.to_string()))?;
-        Ok(())
+        atomic_file::write(path, format!("{text}\n").as_bytes()).map_err(|e| bad(e.to_string()))
     }
 
     pub fn file(&self) -> &UserModelFile {

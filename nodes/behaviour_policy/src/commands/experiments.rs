@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use behaviour_policy::experiments::{EpochScheme, RunSpec};
 use behaviour_policy::grid::{GridSpec, run_grid};
 use behaviour_policy::plot::{Figure, curves_svg};
-use behaviour_policy::report::{curves_csv, last_epoch_table, write_atomic};
+use behaviour_policy::report::{curves_csv, last_epoch_table};
 use behaviour_policy::{Reward, params::validate_learning};
 use std::path::PathBuf;
 
@@ -114,10 +114,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
     let csv_path = a.output.join("curves.csv");
-    write_atomic(&csv_path, &curves_csv(&grid.curves)?)
+    atomic_file::write(&csv_path, &curves_csv(&grid.curves)?)
         .with_context(|| format!("writing {}", csv_path.display()))?;
     let tables_path = a.output.join("user_model_tables.json");
-    write_atomic(&tables_path, serde_json::to_string(&models)?.as_bytes())
+    atomic_file::write(&tables_path, serde_json::to_string(&models)?.as_bytes())
         .with_context(|| format!("writing {}", tables_path.display()))?;
     let table = last_epoch_table(&grid.curves);
     let command: Vec<String> = std::env::args().collect();
@@ -134,7 +134,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         grid.iterations,
         ns * threads as f64,
     );
-    write_atomic(&a.output.join("summary.txt"), summary.as_bytes())?;
+    atomic_file::write(&a.output.join("summary.txt"), summary.as_bytes())?;
     if let Some(path) = &a.timing_json {
         let timing = serde_json::json!({
             "iterations": grid.iterations,
@@ -142,7 +142,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "threads": threads,
             "ns_per_iteration": ns * threads as f64,
         });
-        write_atomic(path, timing.to_string().as_bytes())
+        atomic_file::write(path, timing.to_string().as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if !a.no_figures {

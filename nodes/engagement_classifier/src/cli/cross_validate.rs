@@ -83,7 +83,7 @@ fn export(dir: &Path, fold: &Fold, result: &FoldResult) -> anyhow::Result<()> {
     ];
     for (name, text) in files {
         let path = dir.join(name);
-        engagement_classifier::atomic_write(&path, text.as_bytes())
+        atomic_file::write(&path, text.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
@@ -147,7 +147,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let doc = serde_json::json!({"neutral_label": params.neutral_label,
             "decimal_repair": params.decimal_repair, "folds": folds,
             "mean_accuracy": mean_accuracy(&results)});
-        engagement_classifier::atomic_write(path, serde_json::to_string_pretty(&doc)?.as_bytes())
+        atomic_file::write(path, serde_json::to_string_pretty(&doc)?.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())

@@ -32,7 +32,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     match &args.output {
         Some(path) => {
-            engagement_classifier::atomic_write(path, out.as_bytes())
+            atomic_file::write(path, out.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?;
             tracing::info!("{} rows -> {}", rows.len(), path.display());
         }

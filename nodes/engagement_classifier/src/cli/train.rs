@@ -44,7 +44,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let file = to_model_file(&booster, &args.description);
     let text = serde_json::to_string(&file).context("serialising the model")?;
-    engagement_classifier::atomic_write(&args.output, text.as_bytes())
+    atomic_file::write(&args.output, text.as_bytes())
         .with_context(|| format!("writing {}", args.output.display()))?;
     println!(
         "trained {} trees on {} frames of {} participants -> {}",

@@ -113,14 +113,9 @@ pub fn read_csv(path: &Path) -> Result<Vec<InteractionRecord>, DataError> {
 /// Writes records in our CSV format through a temporary file and a rename (never half a file).
 pub fn write_csv(path: &Path, records: &[InteractionRecord]) -> Result<(), DataError> {
     super::validate_all(records)?;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(|e| DataError::io(path, e))?;
-    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| DataError::io(path, e))?;
+    let mut bytes = Vec::new();
     {
-        let mut w = ::csv::Writer::from_writer(tmp.as_file());
+        let mut w = ::csv::Writer::from_writer(&mut bytes);
         let fail = |e: ::csv::Error| DataError::io(path, e);
         w.write_record(CSV_COLUMNS).map_err(fail)?;
         for r in records {
@@ -143,12 +138,7 @@ pub fn write_csv(path: &Path, records: &[InteractionRecord]) -> Result<(), DataE
         }
         w.flush().map_err(|e| DataError::io(path, e))?;
     }
-    tmp.as_file()
-        .sync_all()
-        .map_err(|e| DataError::io(path, e))?;
-    tmp.persist(path)
-        .map_err(|e| DataError::io(path, e.error))?;
-    Ok(())
+    atomic_file::write(path, &bytes).map_err(|e| DataError::io(path, e))
 }
 
 #[cfg(test)]
