@@ -78,8 +78,8 @@ pub enum ParamsError {
     },
     #[error("parameter {0}")]
     BadChoice(String),
-    #[error("reading {path}: {reason}")]
-    File { path: String, reason: String },
+    #[error(transparent)]
+    File(#[from] node_shell::params::ParamsError),
 }
 
 fn check(
@@ -100,25 +100,13 @@ fn check(
 }
 
 impl EngagementClassifierParams {
-    /// Reads the `engagement_classifier.ros__parameters` map of a ROS 2 parameter file.
+    /// Reads and checks the `engagement_classifier` section of a ROS 2 parameter file, as the
+    /// node does (node_shell's reader: `/**` sections, nested keys), for the offline tools.
     pub fn from_yaml_file(path: &Path) -> Result<EngagementClassifierParams, ParamsError> {
-        #[derive(Deserialize)]
-        struct Node {
-            #[serde(rename = "ros__parameters")]
-            ros_parameters: EngagementClassifierParams,
-        }
-        let err = |reason: String| ParamsError::File {
-            path: path.display().to_string(),
-            reason,
-        };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-        let mut file: std::collections::BTreeMap<String, Node> =
-            serde_saphyr::from_str(&text).map_err(|e| err(e.to_string()))?;
-        let node = file
-            .remove("engagement_classifier")
-            .ok_or_else(|| err("no engagement_classifier section".into()))?;
-        node.ros_parameters.validate()?;
-        Ok(node.ros_parameters)
+        let params: EngagementClassifierParams =
+            node_shell::params::load_parameters(path, "engagement_classifier")?;
+        params.validate()?;
+        Ok(params)
     }
 
     /// Checks every value; the error names the parameter.

@@ -48,6 +48,26 @@ fn bad_parameters_are_named() {
 }
 
 #[test]
+fn the_tools_read_a_parameter_file_as_the_node_does() {
+    // Shared `/**` sections and the node's own section, merged as ROS 2 (and the node) do.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.yaml");
+    std::fs::write(
+        &path,
+        "/**:\n  ros__parameters:\n    seed: 3\n    smoothing_alpha: 0.5\n\
+         engagement_classifier:\n  ros__parameters:\n    smoothing_alpha: 0.25\n",
+    )
+    .expect("write");
+    let params = EngagementClassifierParams::from_yaml_file(&path).expect("reads");
+    assert_eq!((params.seed, params.smoothing_alpha), (3, 0.25));
+    std::fs::write(&path, "game_manager:\n  ros__parameters: {}\n").expect("write");
+    let err = EngagementClassifierParams::from_yaml_file(&path)
+        .expect_err("no section for the classifier")
+        .to_string();
+    assert!(err.contains("engagement_classifier"), "{err}");
+}
+
+#[test]
 fn predict_writes_margin_and_probability_per_row() {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("pred.csv");
