@@ -38,6 +38,28 @@ add q_table_file ../bags/q_tables/*.json
 # The shipped 200 kB engagement model is too slow a seed (under 1,000 runs/s); make_seeds
 # cuts it to its first two trees instead.
 
+# libFuzzer dictionaries for the two YAML formats: their keys (from the repository's own files
+# and the launch parser's fields), substitutions, node names and the values at the edges of the
+# checks, so mutations make well-formed keys holding wrong values rather than misspelt keys.
+# Without them the parameter checks past the first of each struct were never reached
+# (fuzz/coverage.sh params_file lists the lines never run).
+yaml_keys() { grep -ohE '^[ -]*[A-Za-z_/*][A-Za-z0-9_/*]*:' "$@" | sed -E 's/^[ -]*//' | sort -u; }
+write_dict() { local out=$1 w; shift; for w in "$@"; do
+  w=${w//\\/\\\\}; w=${w//\"/\\\"}; w=${w//$'\n'/\\x0A}; printf '"%s"\n' "$w"; done > "$out"; }
+edge_values=(": 0" ": -1" ": 0.0" ": -0.5" ": 1.5" ": 1e309" ": .nan" ": .inf" ": -.inf"
+  ": true" ": false" ": ''" ": []" ": {}" ": ~" ": 9223372036854775807" ": 4294967296" ": 65536"
+  ": \"\"" " " $'\n  ' $'\n    ' ":=")
+mapfile -t param_keys < <(yaml_keys ../params/*.yaml ../tests/params/*.yaml)
+mapfile -t param_nodes < <(for f in ../params/*.yaml; do basename "$f" .yaml; done)
+write_dict "$seeds/params_file.dict" "${param_keys[@]}" "${param_nodes[@]}" "${edge_values[@]}" \
+  "/**:" "/**/" "ros__parameters:" RE RE+bE lE engaged disengaged magnitude none \
+  127.0.0.1:8080 "[::1]:80" en de fr
+mapfile -t launch_keys < <(yaml_keys ../launch_scripts/*.yaml ../tests/launch/*.yaml;
+  sed -nE 's/^    ([a-z_]+): .*/\1:/p' ../nodes/launcher/src/description.rs)
+write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- " "{" "}" \
+  "\$(var " "\$(env " "\$(find-pkg-share " "\$(" ")" "'" "\"" true false True False \
+  screen log both shutdown
+
 # Largest input per target: room for the model files seeded.
 max_len() { case $1 in
   user_model_file) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;
@@ -72,7 +94,9 @@ for t in "${targets[@]}"; do
   fi
   echo "=== $t: $secs s${PLATEAU:+, or until no new edge for $PLATEAU s}"
   log="target/fuzz-$t.log"
-  nice -n 10 "$bin/$t" -max_total_time="$secs" -max_len="$(max_len "$t")" -timeout=10 \
+  dict=()
+  [ -f "$seeds/$t.dict" ] && dict=(-dict="$seeds/$t.dict")
+  nice -n 10 "$bin/$t" "${dict[@]}" -max_total_time="$secs" -max_len="$(max_len "$t")" -timeout=10 \
     -rss_limit_mb=2048 -print_final_stats=1 -interrupt_exit_code=0 -artifact_prefix="artifacts/$t/" \
     "corpus/$t" "$seeds/$t" 2>&1 | tee "$log" &
   if [ -n "${PLATEAU:-}" ]; then watch_plateau "$t" "$log" "$PLATEAU"; fi

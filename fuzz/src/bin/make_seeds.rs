@@ -1,6 +1,8 @@
 //! Writes the generated seeds of every fuzz target under SEEDS_DIR/<target>/: valid encoded
-//! messages of every type, Q-tables as the policy writes them, shrunk copies of the shipped
-//! model files, and tablet conversations. run.sh adds the repository's own files next to them.
+//! messages of every type (hand-made, and real ones from the sample bags), Q-tables as the
+//! policy writes them, shrunk copies of the shipped model files, tablet conversations, and the
+//! shipped parameter and launch files with one value at a time set to an edge value. run.sh
+//! adds the repository's own files next to them.
 //!   make_seeds SEEDS_DIR
 
 use behaviour_policy::learning::QTable;
@@ -16,10 +18,119 @@ fn main() -> anyhow::Result<()> {
     let root = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "seeds".into()));
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     messages(&root.join("msg_decode"))?;
+    recorded_messages(&repo, &root.join("msg_decode"))?;
     q_tables(&root.join("q_table_file"))?;
     user_models(&repo, &root.join("user_model_file"))?;
     xgboost(&repo, &root.join("xgboost_model"))?;
     tablet(&root.join("tablet_ws"))?;
+    parameter_edges(&repo, &root.join("params_file"))?;
+    launch_edges(&repo, &root.join("launch_file"))?;
+    Ok(())
+}
+
+/// Each shipped launch file with its first executable given, one at a time, a key the
+/// repository's files never use or a value its checks refuse (`fuzz/coverage.sh launch_file`
+/// showed `args`, `cwd`, per-process `env` and a wrong `output` unreached after hours).
+fn launch_edges(repo: &Path, dir: &Path) -> anyhow::Result<()> {
+    const EXTRA: [&str; 10] = [
+        "    args: \"--x 1 --note 'two words'\"",
+        "    args: \"--note 'unbalanced\"",
+        "    cwd: $(var out)",
+        "    output: nowhere",
+        "    output: both",
+        "    env: [{name: A, value: $(var out)}, {name: B, value: \"$(env HOME)\"}]",
+        "    on_exit: restart",
+        "    respawn: maybe",
+        "    respawn_delay: soon",
+        "    cmd: \"''\"",
+    ];
+    let mut files = Vec::new();
+    for folder in ["launch_scripts", "tests/launch"] {
+        for e in std::fs::read_dir(repo.join(folder))?.filter_map(|e| e.ok()) {
+            if e.file_name().to_string_lossy().ends_with(".launch.yaml") {
+                files.push(e.path());
+            }
+        }
+    }
+    files.sort();
+    for path in files {
+        let stem = path
+            .file_name()
+            .map(|s| s.to_string_lossy().replace(".launch.yaml", ""));
+        let text = std::fs::read_to_string(&path)?;
+        let lines: Vec<&str> = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with('#'))
+            .collect();
+        // The `cmd:` line of the first executable; a replacement `cmd:` takes its place.
+        let Some(cmd) = lines.iter().position(|l| l.starts_with("    cmd:")) else {
+            continue;
+        };
+        for (n, extra) in EXTRA.iter().enumerate() {
+            let mut changed = lines.clone();
+            if extra.trim_start().starts_with("cmd:") {
+                changed[cmd] = extra;
+            } else {
+                changed.insert(cmd + 1, extra);
+            }
+            let name = format!("edge_{}_{n}", stem.as_deref().unwrap_or("launch"));
+            write(dir, &name, (changed.join("\n") + "\n").as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// Each shipped parameter file (comments dropped) once per parameter and edge value, that one
+/// parameter changed: every node's checks start reached. Mutating YAML text rarely turns a
+/// valid file into a well-typed wrong value; the first hours of fuzzing never tried
+/// `exploitation_only: false` or a `reward` it does not know (`fuzz/coverage.sh params_file`).
+fn parameter_edges(repo: &Path, dir: &Path) -> anyhow::Result<()> {
+    const EDGES: [&str; 13] = [
+        "0",
+        "-1",
+        "0.5",
+        "1e309",
+        ".nan",
+        "-.inf",
+        "true",
+        "false",
+        "\"\"",
+        "x",
+        "[]",
+        "9223372036854775807",
+        "-9223372036854775808",
+    ];
+    let mut files: Vec<PathBuf> = std::fs::read_dir(repo.join("params"))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "yaml"))
+        .collect();
+    files.sort();
+    for path in files {
+        let node = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        let node = node.as_deref().unwrap_or("params");
+        let text = std::fs::read_to_string(&path)?;
+        let lines: Vec<&str> = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with('#'))
+            .collect();
+        for (i, line) in lines.iter().enumerate() {
+            // A parameter: indented under `ros__parameters:`, `key: value`.
+            let indent = line.len() - line.trim_start().len();
+            let Some((key, _)) = line.trim_start().split_once(": ") else {
+                continue;
+            };
+            if indent < 4 {
+                continue;
+            }
+            for (n, edge) in EDGES.iter().enumerate() {
+                let mut changed = lines.clone();
+                let replaced = format!("{}{key}: {edge}", &line[..indent]);
+                changed[i] = &replaced;
+                let name = format!("edge_{node}_{key}_{n}");
+                write(dir, &name, (changed.join("\n") + "\n").as_bytes())?;
+            }
+        }
+    }
     Ok(())
 }
 
@@ -38,10 +149,55 @@ fn kind(name: &str) -> anyhow::Result<u8> {
     Ok(u8::try_from(i)?)
 }
 
-fn message<M: Serialize>(dir: &Path, name: &str, tag: &str, m: &M) -> anyhow::Result<()> {
+/// A seed message. Every seed but the all-default one (`tag` "0") must pass the checks, so
+/// the fuzzer starts past them: an invalid seed once kept every SequenceResult check after the
+/// first failing one unreached (`fuzz/coverage.sh msg_decode`).
+fn message<M: Serialize + Validate>(
+    dir: &Path,
+    name: &str,
+    tag: &str,
+    m: &M,
+) -> anyhow::Result<()> {
+    if tag != "0" {
+        m.validate()
+            .map_err(|e| anyhow::anyhow!("seed {name} {tag} is not a valid message: {e}"))?;
+    }
     let mut bytes = vec![kind(name)?];
     bytes.extend(bag::cdr::encode(m)?);
     write(dir, &format!("seed_{name}_{tag}"), &bytes)
+}
+
+/// Real messages: the first few of each fuzzed type in each sample bag (`bags/*.mcap`), as
+/// the live nodes encoded them.
+fn recorded_messages(repo: &Path, dir: &Path) -> anyhow::Result<()> {
+    const PER_TYPE: usize = 3;
+    let mut bags: Vec<PathBuf> = std::fs::read_dir(repo.join("bags"))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    bags.sort();
+    for path in bags {
+        let reader = bag::BagReader::open(&path)?;
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        let mut taken = std::collections::BTreeMap::<u8, usize>::new();
+        for (channel, raw) in reader.iter() {
+            // `qt_therapy_msgs/msg/GameState`, `std_msgs/msg/String`, `.../srv/X_Request`.
+            let Some(name) = channel.type_name().rsplit('/').next() else {
+                continue;
+            };
+            let Ok(k) = kind(name) else { continue };
+            let n = taken.entry(k).or_default();
+            if *n == PER_TYPE {
+                continue;
+            }
+            *n += 1;
+            let mut bytes = vec![k];
+            bytes.extend(&raw.data);
+            let tag = format!("{}_{n}", stem.as_deref().unwrap_or("bag"));
+            write(dir, &format!("recorded_{name}_{tag}"), &bytes)?;
+        }
+    }
+    Ok(())
 }
 
 fn messages(dir: &Path) -> anyhow::Result<()> {
@@ -135,8 +291,8 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         action: 1,
         level: 2,
         feedback: 1,
-        sequence: words(&["happy", "sad"]),
-        answer: words(&["happy", "angry"]),
+        sequence: words(&["happy", "sad", "angry", "happy", "disgusted"]),
+        answer: words(&["happy", "sad", "angry", "sad", "disgusted"]),
         outcome: -1,
         activity_result: -0.5,
         engagement: 0.3,
@@ -242,7 +398,7 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         user_id: "u1".into(),
         user_model_cluster: 0,
         state,
-        step: 1,
+        step: 2,
     };
     message(dir, "DecideAction_Request", "1", &decide)?;
     let decided = DecideActionResponse {

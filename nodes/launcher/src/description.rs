@@ -124,8 +124,11 @@ pub fn parse_launch(
                         })?,
                     );
                 }
-                if words.is_empty() {
-                    return Err(invalid("an executable has an empty cmd".into()));
+                // `cmd: "''"` splits into one empty word: no program either (found by fuzzing).
+                if words.first().is_none_or(|w| w.trim().is_empty()) {
+                    return Err(invalid(format!(
+                        "an executable has no program in cmd {cmd:?}"
+                    )));
                 }
                 let program = words.remove(0);
                 let name = match &x.name {
@@ -315,6 +318,11 @@ launch:
         )
         .expect_err("dup");
         assert!(e.to_string().contains("two executables"), "{e}");
+        for cmd in ["\"\"", "\"''\"", "\"'  '\""] {
+            let text = format!("launch:\n- executable: {{cmd: {cmd}}}\n");
+            let e = parse(&text, &[]).expect_err("no program");
+            assert!(e.to_string().contains("no program"), "{cmd}: {e}");
+        }
         let e = parse("launch:\n- arg: {name: x}\n", &[]).expect_err("no default");
         assert!(e.to_string().contains("x:=VALUE"), "{e}");
     }
