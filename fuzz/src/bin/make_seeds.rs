@@ -44,24 +44,14 @@ fn launch_edges(repo: &Path, dir: &Path) -> anyhow::Result<()> {
         "    respawn_delay: soon",
         "    cmd: \"''\"",
     ];
-    let mut files = Vec::new();
-    for folder in ["launch_scripts", "tests/launch"] {
-        for e in std::fs::read_dir(repo.join(folder))?.filter_map(|e| e.ok()) {
-            if e.file_name().to_string_lossy().ends_with(".launch.yaml") {
-                files.push(e.path());
-            }
-        }
-    }
-    files.sort();
+    let mut files = files_in(&repo.join("launch_scripts"), ".launch.yaml")?;
+    files.extend(files_in(&repo.join("tests/launch"), ".launch.yaml")?);
     for path in files {
         let stem = path
             .file_name()
             .map(|s| s.to_string_lossy().replace(".launch.yaml", ""));
         let text = std::fs::read_to_string(&path)?;
-        let lines: Vec<&str> = text
-            .lines()
-            .filter(|l| !l.trim_start().starts_with('#'))
-            .collect();
+        let lines = uncommented_lines(&text);
         // The `cmd:` line of the first executable; a replacement `cmd:` takes its place.
         let Some(cmd) = lines.iter().position(|l| l.starts_with("    cmd:")) else {
             continue;
@@ -100,19 +90,11 @@ fn parameter_edges(repo: &Path, dir: &Path) -> anyhow::Result<()> {
         "9223372036854775807",
         "-9223372036854775808",
     ];
-    let mut files: Vec<PathBuf> = std::fs::read_dir(repo.join("params"))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "yaml"))
-        .collect();
-    files.sort();
-    for path in files {
+    for path in files_in(&repo.join("params"), ".yaml")? {
         let node = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         let node = node.as_deref().unwrap_or("params");
         let text = std::fs::read_to_string(&path)?;
-        let lines: Vec<&str> = text
-            .lines()
-            .filter(|l| !l.trim_start().starts_with('#'))
-            .collect();
+        let lines = uncommented_lines(&text);
         for (i, line) in lines.iter().enumerate() {
             // A parameter: indented under `ros__parameters:`, `key: value`.
             let indent = line.len() - line.trim_start().len();
@@ -132,6 +114,23 @@ fn parameter_edges(repo: &Path, dir: &Path) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The files of `dir` whose names end with `suffix`, sorted (seeds named alike every run).
+fn files_in(dir: &Path, suffix: &str) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_string_lossy().ends_with(suffix))
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// A YAML file's lines without its comment lines (smaller seeds, the same meaning).
+fn uncommented_lines(text: &str) -> Vec<&str> {
+    text.lines()
+        .filter(|l| !l.trim_start().starts_with('#'))
+        .collect()
 }
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
@@ -171,12 +170,7 @@ fn message<M: Serialize + Validate>(
 /// the live nodes encoded them.
 fn recorded_messages(repo: &Path, dir: &Path) -> anyhow::Result<()> {
     const PER_TYPE: usize = 3;
-    let mut bags: Vec<PathBuf> = std::fs::read_dir(repo.join("bags"))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .collect();
-    bags.sort();
-    for path in bags {
+    for path in files_in(&repo.join("bags"), ".mcap")? {
         let reader = bag::BagReader::open(&path)?;
         let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         let mut taken = std::collections::BTreeMap::<u8, usize>::new();
