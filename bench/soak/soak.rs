@@ -362,24 +362,15 @@ struct Driving<'a> {
 
 /// All sessions from one console process: its output is followed line by line.
 fn drive_one_console(d: &Driving) -> anyhow::Result<Driven> {
-    let Driving {
-        cli,
-        bin,
-        root,
-        out,
-        stderr_log,
-        run_id,
-        every,
-    } = *d;
     use std::io::BufRead as _;
-    wait_for_nodes(stderr_log)?;
-    let mut driven = Driven::starting(out);
-    let base = format!("soak-{run_id}");
+    wait_for_nodes(d.stderr_log)?;
+    let mut driven = Driven::starting(d.out);
+    let base = format!("soak-{}", d.run_id);
     let soak_started = Instant::now();
-    let mut console = run_session_command(bin, root, &base, cli.session_timeout)
-        .args(["--sessions", &cli.sessions.to_string()])
+    let mut console = run_session_command(d.bin, d.root, &base, d.cli.session_timeout)
+        .args(["--sessions", &d.cli.sessions.to_string()])
         .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(out.join("console.stderr.log"))?)
+        .stderr(std::fs::File::create(d.out.join("console.stderr.log"))?)
         .spawn()
         .context("starting therapist run-session")?;
     let stdout = console.stdout.take().context("console stdout")?;
@@ -406,9 +397,9 @@ fn drive_one_console(d: &Driving) -> anyhow::Result<Driven> {
                 driven.failed.push(id.clone());
                 println!("[soak]   {line}");
             }
-            progress(k, cli.sessions, &id, ok, t0.elapsed(), soak_started);
-            if k == 1 || k.is_multiple_of(every) || k == cli.sessions {
-                driven.samples.push((k, sample_nodes(stderr_log)));
+            progress(k, d.cli.sessions, &id, ok, t0.elapsed(), soak_started);
+            if k == 1 || k.is_multiple_of(d.every) || k == d.cli.sessions {
+                driven.samples.push((k, sample_nodes(d.stderr_log)));
             }
         } else if line.starts_with("seq ") {
             lines_of_session += 1;
@@ -429,27 +420,20 @@ fn drive_one_console(d: &Driving) -> anyhow::Result<Driven> {
 }
 
 fn drive(d: &Driving) -> anyhow::Result<Driven> {
-    let Driving {
-        cli,
-        bin,
-        root,
-        out,
-        stderr_log,
-        run_id,
-        every,
-    } = *d;
-    wait_for_nodes(stderr_log)?;
+    wait_for_nodes(d.stderr_log)?;
     let sample = |done: u32, samples: &mut Vec<(u32, BTreeMap<String, Usage>)>| {
-        samples.push((done, sample_nodes(stderr_log)));
+        samples.push((done, sample_nodes(d.stderr_log)));
     };
-    let mut driven = Driven::starting(out);
+    let mut driven = Driven::starting(d.out);
     let soak_started = Instant::now();
     let mut consecutive_failures = 0;
-    for k in 1..=cli.sessions {
-        if cli.max_minutes > 0.0 && soak_started.elapsed().as_secs_f64() > cli.max_minutes * 60.0 {
+    for k in 1..=d.cli.sessions {
+        if d.cli.max_minutes > 0.0
+            && soak_started.elapsed().as_secs_f64() > d.cli.max_minutes * 60.0
+        {
             println!(
                 "[soak] {} minutes are up: stopping after {} sessions",
-                cli.max_minutes,
+                d.cli.max_minutes,
                 k - 1
             );
             if driven.samples.last().is_some_and(|(n, _)| *n != k - 1) {
@@ -457,9 +441,9 @@ fn drive(d: &Driving) -> anyhow::Result<Driven> {
             }
             break;
         }
-        let session = format!("soak-{run_id}-{k:05}");
+        let session = format!("soak-{}-{k:05}", d.run_id);
         let t0 = Instant::now();
-        let output = run_session_command(bin, root, &session, cli.session_timeout)
+        let output = run_session_command(d.bin, d.root, &session, d.cli.session_timeout)
             .output()
             .context("running therapist run-session")?;
         let took = t0.elapsed();
@@ -471,13 +455,13 @@ fn drive(d: &Driving) -> anyhow::Result<Driven> {
         if stdout.contains(&format!("session {session} started")) {
             driven.started.push(session.clone());
         }
-        progress(k, cli.sessions, &session, ok, took, soak_started);
+        progress(k, d.cli.sessions, &session, ok, took, soak_started);
         if ok {
             consecutive_failures = 0;
         } else {
             driven.failed.push(session.clone());
             consecutive_failures += 1;
-            let log = out.join(format!("console-{session}.log"));
+            let log = d.out.join(format!("console-{session}.log"));
             let mut f = std::fs::File::create(&log)?;
             f.write_all(&output.stdout)?;
             f.write_all(&output.stderr)?;
@@ -491,7 +475,7 @@ fn drive(d: &Driving) -> anyhow::Result<Driven> {
                 break;
             }
         }
-        if k == 1 || k.is_multiple_of(every) || k == cli.sessions {
+        if k == 1 || k.is_multiple_of(d.every) || k == d.cli.sessions {
             sample(k, &mut driven.samples);
         }
     }
