@@ -81,22 +81,29 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
         .count();
     assert_eq!(requests, 1, "{context}");
 
-    // The bad answers were dropped and counted (two out of range, one undecodable), logged
-    // with the topic and reason, and the responder kept serving and exited cleanly.
+    // The bad answers were dropped and counted (four out of range, one undecodable), each
+    // kind logged once with the topic and reason, and the responder kept serving and exited
+    // cleanly.
     let stopped = json_lines(&responder)
         .into_iter()
         .find(|e| e["event"] == "stopped");
     assert_eq!(
         stopped.map(|e| e["dropped_answers"].clone()),
-        Some(3.into()),
+        Some(5.into()),
         "{context}"
     );
-    assert!(
-        responder_err.contains("/qt_therapy/tablet/answer"),
-        "{context}"
-    );
-    assert!(responder_err.contains("joyful"), "{context}");
-    assert!(responder_err.contains("undecodable"), "{context}");
+    let drop_lines: Vec<&str> = responder_err
+        .lines()
+        .filter(|l| l.contains("dropped") && l.contains("/qt_therapy/tablet/answer"))
+        .collect();
+    assert_eq!(drop_lines.len(), 3, "{context}");
+    for reason in ["joyful", "response_time", "undecodable"] {
+        assert_eq!(
+            drop_lines.iter().filter(|l| l.contains(reason)).count(),
+            1,
+            "{reason}: {context}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

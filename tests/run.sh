@@ -15,6 +15,10 @@ command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
 command -v openssl >/dev/null || need_apt+=(openssl)
 [ -e /usr/include/openssl/ssl.h ] || need_apt+=(libssl-dev)
 command -v pkg-config >/dev/null || need_apt+=(pkg-config)
+# The bag check's Python readers go into a venv: Debian's own python3 refuses `pip install`
+# into the system (PEP 668), and a venv needs ensurepip, which Debian ships apart.
+command -v python3 >/dev/null || need_apt+=(python3)
+python3 -c 'import ensurepip' 2>/dev/null || need_apt+=(python3-venv)
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "installing: ${need_apt[*]}"
   if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
@@ -28,8 +32,10 @@ cargo test -p node_shell --features security --test dds_security
 
 # Bags must be readable by the standard Python readers too.
 if [ -f tests/bags/check_bag.py ]; then
-  python3 -m pip install -q -r tests/bags/requirements.txt
-  python3 tests/bags/check_bag.py
+  venv="${CARGO_TARGET_DIR:-target}/bag-check-venv"
+  [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install -q -r tests/bags/requirements.txt
+  "$venv/bin/python" tests/bags/check_bag.py
   # and the committed sample sessions
-  python3 tests/bags/check_bag.py bags/*.mcap
+  "$venv/bin/python" tests/bags/check_bag.py bags/*.mcap
 fi

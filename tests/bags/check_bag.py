@@ -3,6 +3,7 @@
 `mcap-ros2-support` decoding the `ros2msg` schemas and CDR payloads) and `rosbags`.
 
 Run from the workspace root:
+    python3 -m venv target/bag-check-venv && . target/bag-check-venv/bin/activate  # (Debian: PEP 668)
     python3 -m pip install -q -r tests/bags/requirements.txt
     python3 tests/bags/check_bag.py              # writes and checks the synthetic test session
     python3 tests/bags/check_bag.py A.mcap ...   # checks bags you recorded (both readers agree)

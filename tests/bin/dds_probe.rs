@@ -151,14 +151,17 @@ async fn caller(shell: &mut NodeShell, count: u32) -> anyhow::Result<()> {
         response_time: 1.5,
     };
     answers.send(valid(1));
-    // Out of range: an unknown emotion, then a NaN response time.
-    answers.send(TabletAnswer {
-        answer: vec!["joyful".into()],
-        ..valid(1000)
-    });
+    // Out of range: an unknown emotion (three times: logged once, counted thrice), then a NaN
+    // response time.
+    for id in 1000..1003 {
+        answers.send(TabletAnswer {
+            answer: vec!["joyful".into()],
+            ..valid(id)
+        });
+    }
     answers.send(TabletAnswer {
         response_time: f32::NAN,
-        ..valid(1001)
+        ..valid(1003)
     });
     // Undecodable as a TabletAnswer.
     truncated

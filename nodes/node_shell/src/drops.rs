@@ -1,6 +1,7 @@
 //! Bookkeeping for input a node refused: the first message per topic and reason is logged as a
-//! warning, repeats are counted (and logged again at 10, 100, 1000, ...), so a flood of
-//! nonsense cannot flood the log while the reason stays visible.
+//! warning, repeats are counted (and logged again with the count at powers of two from 8 and
+//! at 10, 100, 1000, 10000), so a flood of nonsense cannot flood the log while the reason
+//! stays visible.
 
 use std::collections::HashMap;
 use std::sync::Mutex;

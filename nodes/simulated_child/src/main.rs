@@ -30,9 +30,21 @@ async fn main() -> anyhow::Result<()> {
     if let Some(c) = cli.cluster {
         params.cluster = c;
     }
+    // Every way out, errors included, stops the shell first: its DDS entities go before the
+    // participant, so the error is the last line printed, not RustDDS noise.
+    let outcome = play(&mut shell, params).await;
+    shell.stop().await;
+    outcome
+}
+
+/// Plays the child until the node is asked to stop.
+async fn play(shell: &mut NodeShell, params: ChildParams) -> anyhow::Result<()> {
     let set = user_model::UserModelSet::load(std::path::Path::new(&params.user_model_file))
         .with_context(|| format!("loading user_model_file {}", params.user_model_file))?;
-    let table = set.table(params.cluster)?.clone();
+    let table = set
+        .table(params.cluster)
+        .with_context(|| format!("user_model_file {}", params.user_model_file))?
+        .clone();
     tracing::info!(cluster = params.cluster, model = %params.user_model_file, "simulated child ready (SYNTHETIC faces)");
     let mut child = SimulatedChild::new(params, table)?;
     {
@@ -65,6 +77,5 @@ async fn main() -> anyhow::Result<()> {
             }
         }
     }
-    shell.stop().await;
     Ok(())
 }

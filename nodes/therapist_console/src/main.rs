@@ -44,7 +44,7 @@ enum Command {
     Override {
         #[command(flatten)]
         session: SessionArg,
-        #[arg(long)]
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=3))]
         level: u8,
     },
 }
@@ -84,12 +84,14 @@ fn command(kind: u8, session: &str) -> TherapistCommand {
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let (mut shell, NoParameters {}) = NodeShell::start("therapist_console", &cli.shell)?;
-    let code = {
+    // Every way out, errors included, stops the shell first: its DDS entities go before the
+    // participant, so the error is the last thing the therapist reads, not RustDDS noise.
+    let outcome: anyhow::Result<i32> = async {
         let commands = shell.publisher(THERAPIST_COMMAND)?;
         let mut states = shell.subscribe(GAME_STATE, 64)?;
         let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
         let mut decisions = shell.subscribe(DECISION, 64)?;
-        match cli.command {
+        let code = match cli.command {
             Command::Start(a) => {
                 let c = start_command(&a, Some(&mut states)).await?;
                 send(&commands, &shell, &mut states, c).await?
@@ -171,10 +173,12 @@ async fn main() -> anyhow::Result<()> {
                 c.level = level;
                 send(&commands, &shell, &mut states, c).await?
             }
-        }
-    };
+        };
+        Ok(code)
+    }
+    .await;
     shell.stop().await;
-    std::process::exit(code);
+    std::process::exit(outcome?);
 }
 
 /// How long the console waits for the game manager to confirm a command before sending it

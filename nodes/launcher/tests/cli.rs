@@ -1,0 +1,96 @@
+//! The `launch` binary with plain shell commands as nodes (no DDS, so no namespace): output
+//! prefixed per node, a dying node reported and the launch's exit code set, a node that cannot
+//! start named while the others are stopped, and a broken launch file refused before anything
+//! starts.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn launch(dir: &Path, file_text: &str) -> Output {
+    let file = dir.join("test.launch.yaml");
+    std::fs::write(&file, file_text).expect("writes the launch file");
+    Command::new(env!("CARGO_BIN_EXE_launch"))
+        .arg(&file)
+        .args(["--grace", "2"])
+        .current_dir(dir)
+        // Keep anyhow's error report to the message a user sees.
+        .env_remove("RUST_BACKTRACE")
+        .env_remove("RUST_LIB_BACKTRACE")
+        .output()
+        .expect("runs launch")
+}
+
+fn text(out: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn output_is_prefixed_per_node_and_a_dying_node_sets_the_exit_code() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = launch(
+        dir.path(),
+        "launch:\n\
+         - executable:\n    cmd: sh -c 'echo hello; echo oops >&2; exit 3'\n    name: first\n\
+         - executable:\n    cmd: sh -c 'sleep 0.5; echo second done'\n    name: second\n",
+    );
+    let (stdout, stderr) = text(&out);
+    let context = format!("stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert_eq!(out.status.code(), Some(1), "{context}");
+    assert!(stdout.lines().any(|l| l == "[first] hello"), "{context}");
+    assert!(
+        stdout.lines().any(|l| l == "[second] second done"),
+        "{context}"
+    );
+    assert!(stderr.lines().any(|l| l == "[first] oops"), "{context}");
+    assert!(
+        stderr.contains("[launch] first died (exit code 3)"),
+        "{context}"
+    );
+    assert!(stderr.contains("[launch] second finished"), "{context}");
+}
+
+#[test]
+fn a_node_that_cannot_start_is_named_and_the_others_are_stopped() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = launch(
+        dir.path(),
+        "launch:\n\
+         - executable:\n    cmd: /nonexistent/program --flag\n    name: ghost\n\
+         - executable:\n    cmd: sleep 30\n    name: sleeper\n",
+    );
+    let (stdout, stderr) = text(&out);
+    let context = format!("stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert_ne!(out.status.code(), Some(0), "{context}");
+    assert!(
+        stderr.contains("could not start ghost (/nonexistent/program)"),
+        "{context}"
+    );
+    // Stopped by the launcher, long before its 30 s were up.
+    assert!(
+        stderr.contains("[launch] sleeper stopped (signal SIGINT)"),
+        "{context}"
+    );
+}
+
+#[test]
+fn a_broken_launch_file_is_refused_by_name_before_anything_starts() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = launch(
+        dir.path(),
+        "launch:\n\
+         - executable:\n    cmd: touch started\n    name: toucher\n\
+         - executable:\n    name: no_command\n",
+    );
+    let (stdout, stderr) = text(&out);
+    let context = format!("stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert_eq!(out.status.code(), Some(1), "{context}");
+    assert!(stderr.contains("test.launch.yaml"), "{context}");
+    assert!(stderr.contains("missing field `cmd`"), "{context}");
+    assert!(
+        !dir.path().join("started").exists(),
+        "the valid first node ran although the file is broken: {context}"
+    );
+}
