@@ -8,6 +8,7 @@ use crate::logging::init_logging;
 use crate::params::{apply_overrides, parameters_from_map, read_parameter_map};
 use crate::security::{SecurityError, SecurityMode};
 use anyhow::{Context as _, bail};
+use futures::FutureExt as _;
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::{HEARTBEAT, QosKind, Service, Topic};
 use qt_therapy_msgs::{Heartbeat, InvalidMessage, MessageDefinition, Validate, dds_type_name};
@@ -256,8 +257,21 @@ impl NodeShell {
             .with_context(|| format!("creating node {name}"))?;
         let (rosout, rosout_drain) = rosout(&context, &mut node)?;
         let spinner = node.spinner().context("starting the node's spinner")?;
+        // RustDDS 0.15.1 deadlocks a secured participant when one thread creates a reader or
+        // writer (security-plugins lock, then participant lock) while another creates a topic
+        // (participant lock, then plugins lock): seen once as a node hung at start-up
+        // (tests/dds_security.rs `rustdds_deadlocks_creating_readers_and_topics_at_once`).
+        // The spinner creates its two readers in its first poll, before its first await; poll
+        // it once here, so they are made on this thread in turn with the node's own entities,
+        // never beside them on a tokio worker.
+        let mut spin = Box::pin(spinner.spin());
+        let spun_out = (&mut spin).now_or_never();
         let spinner_task = tokio::spawn(async move {
-            if let Err(e) = spinner.spin().await {
+            let result = match spun_out {
+                Some(result) => result,
+                None => spin.await,
+            };
+            if let Err(e) = result {
                 tracing::error!("ros2-client spinner stopped: {e:?}");
             }
         });
