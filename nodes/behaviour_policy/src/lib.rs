@@ -5,6 +5,7 @@
 //! the sans-IO core of the decision node. Depends on user models only through
 //! `sequence_game::UserModelTable`.
 
+pub mod cluster_policies;
 pub mod experiments;
 pub mod grid;
 pub mod learning;
@@ -19,6 +20,7 @@ pub mod report;
 pub mod simulation;
 pub mod softmax_cache;
 
+pub use cluster_policies::{ClusterPolicies, ClusterTable, ServeError};
 pub use learning::{Learning, Mode, QTable, Reward, TemperatureSchedule};
 pub use params::BehaviourPolicyParams;
 pub use persistent::{PersistentError, PersistentPolicy};

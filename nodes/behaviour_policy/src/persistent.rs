@@ -6,7 +6,7 @@
 use crate::learning::{Learning, Mode, QTable};
 use crate::policy_core::{Decision, PolicyCore, PolicyError, Transition, Update};
 use crate::q_table_file::{QTableError, QTableFile, QTableOwner};
-use sequence_game::State;
+use sequence_game::{Action, SEQUENCES_PER_SESSION, State};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -24,6 +24,17 @@ pub enum PersistentError {
     },
     #[error("{path}: learned, but saving failed ({source}); the update is kept in memory")]
     NotSaved { path: PathBuf, source: QTableError },
+    #[error("{path}: no file, and no table to start from ({reason}); nothing written")]
+    NoInitialTable { path: PathBuf, reason: String },
+    #[error("sequence index {0} is outside 1..={SEQUENCES_PER_SESSION}; not learned")]
+    SequenceIndex(u8),
+    #[error(
+        "sequence {sequence_index} starts from {state}: only sequence 1 starts from the start \
+         state (0, 0, 0), and it always does; not learned"
+    )]
+    StartState { sequence_index: u8, state: State },
+    #[error("sequence 1 took {0}: feedback is not allowed at the first sequence; not learned")]
+    FeedbackAtFirstSequence(Action),
 }
 
 /// A `PolicyCore` and the file it lives in.
@@ -45,14 +56,15 @@ pub enum Opened {
 
 impl PersistentPolicy {
     /// Loads `dir/<owner file>`; when there is none, builds a table with `initial` (e.g.
-    /// pretraining in simulation), saves it, and uses it.
+    /// pretraining in simulation), saves it, and uses it. When `initial` fails nothing is
+    /// written, so a later start does not mistake a placeholder for a trained table.
     pub fn open(
         dir: &Path,
         owner: QTableOwner,
         learning: Learning,
         mode: Mode,
         seed: u64,
-        initial: impl FnOnce() -> (QTable, String),
+        initial: impl FnOnce() -> Result<(QTable, String), String>,
     ) -> Result<(PersistentPolicy, Opened), PersistentError> {
         let path = dir.join(owner.file_name()?);
         let (file, opened) = if path.exists() {
@@ -66,7 +78,11 @@ impl PersistentPolicy {
             }
             (file, Opened::Loaded)
         } else {
-            let (table, provenance) = initial();
+            let (table, provenance) =
+                initial().map_err(|reason| PersistentError::NoInitialTable {
+                    path: path.clone(),
+                    reason,
+                })?;
             let file = QTableFile {
                 owner: owner.clone(),
                 provenance,
@@ -113,13 +129,16 @@ impl PersistentPolicy {
     }
 
     /// Learns from sequence `sequence_index` of `session_id` unless it already has (None):
-    /// the results topic is replayed to a policy that restarts mid-session.
+    /// the results topic is replayed to a policy that restarts mid-session. Refuses a
+    /// transition its place in the session rules out: sequence 1, and only it, starts from
+    /// (0, 0, 0), with a1..a3 (the rule `decide` follows at step 1).
     pub fn learn_sequence(
         &mut self,
         session_id: &str,
         sequence_index: u8,
         t: &Transition,
     ) -> Result<Option<Update>, PersistentError> {
+        check_place_in_session(sequence_index, t)?;
         if self
             .learned
             .get(session_id)
@@ -154,6 +173,24 @@ impl PersistentPolicy {
     }
 }
 
+/// The session rules a transition's sequence index implies; `PolicyCore::learn` cannot check
+/// them, as a `Transition` does not know where in the session it was.
+fn check_place_in_session(sequence_index: u8, t: &Transition) -> Result<(), PersistentError> {
+    if !(1..=SEQUENCES_PER_SESSION).contains(&usize::from(sequence_index)) {
+        return Err(PersistentError::SequenceIndex(sequence_index));
+    }
+    if sequence_index == 1 && t.action.is_feedback() {
+        return Err(PersistentError::FeedbackAtFirstSequence(t.action));
+    }
+    if (sequence_index == 1) != t.state.is_start() {
+        return Err(PersistentError::StartState {
+            sequence_index,
+            state: t.state,
+        });
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -166,14 +203,20 @@ mod tests {
             Learning::default(),
             Mode::Exploit,
             1,
-            || (QTable::default(), "fresh".into()),
+            || Ok((QTable::default(), "fresh".into())),
         )
     }
 
+    /// A transition the game could report as sequence `step`: the first from (0, 0, 0), the
+    /// others from (1, 0, +1).
     fn transition(step: u8) -> Transition {
         let level = Level::new(i64::from(step % 3) + 1).expect("level");
         Transition {
-            state: State::START,
+            state: if step == 1 {
+                State::START
+            } else {
+                State::new(1, 0, 1).expect("state")
+            },
             action: Action::SetLevel(level),
             activity_result: f64::from(level.get()),
             engagement: 0.25,
@@ -282,5 +325,86 @@ mod tests {
             Err(PersistentError::Policy(PolicyError::Engagement(_)))
         ));
         assert_eq!(std::fs::read(p.path()).expect("read"), before);
+    }
+
+    #[test]
+    fn a_result_out_of_place_in_its_session_is_refused_and_nothing_written() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (mut p, _) = open(dir.path()).expect("creates");
+        p.learn_sequence("s", 1, &transition(1)).expect("learns");
+        let before = std::fs::read(p.path()).expect("read");
+        let mid = State::new(2, 0, -2).expect("state");
+        let refused = [
+            // Sequence 1 from a state with a level: the game never starts there.
+            (
+                1,
+                Transition {
+                    state: mid,
+                    next_state: State::new(2, 0, 2).expect("state"),
+                    ..transition(1)
+                },
+                "sequence 1 starts from (L=2, F=0, PS=-2)",
+            ),
+            // Sequence 1 with feedback (allowed in that state, not at the first sequence).
+            (
+                1,
+                Transition {
+                    state: mid,
+                    action: Action::Encourage,
+                    next_state: State::new(2, 1, 2).expect("state"),
+                    ..transition(1)
+                },
+                "sequence 1 took a4 encourage",
+            ),
+            // A later sequence from the start state.
+            (
+                4,
+                Transition {
+                    state: State::START,
+                    ..transition(4)
+                },
+                "sequence 4 starts from (L=0, F=0, PS=+0)",
+            ),
+            (0, transition(2), "sequence index 0 is outside 1..=10"),
+            (11, transition(2), "sequence index 11 is outside 1..=10"),
+        ];
+        for (index, t, says) in refused {
+            let e = p.learn_sequence("t", index, &t).expect_err("out of place");
+            assert!(e.to_string().contains(says), "{e} lacks {says:?}");
+            assert_eq!(p.core().updates(), 1);
+            assert_eq!(p.last_learned("t"), None);
+            assert_eq!(std::fs::read(p.path()).expect("read"), before);
+        }
+        // The same session goes on normally.
+        assert!(
+            p.learn_sequence("t", 1, &transition(1))
+                .expect("learns")
+                .is_some()
+        );
+        assert!(
+            p.learn_sequence("t", 2, &transition(2))
+                .expect("learns")
+                .is_some()
+        );
+        assert_eq!(p.core().updates(), 3);
+    }
+
+    #[test]
+    fn no_initial_table_writes_no_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let e = PersistentPolicy::open(
+            dir.path(),
+            QTableOwner::Cluster(0),
+            Learning::default(),
+            Mode::Exploit,
+            1,
+            || Err("pretraining had no run".into()),
+        )
+        .expect_err("no table");
+        assert!(
+            e.to_string().contains("cluster_0.json") && e.to_string().contains("no run"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read_dir(dir.path()).expect("lists").count(), 0);
     }
 }

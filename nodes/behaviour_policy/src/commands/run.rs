@@ -1,15 +1,13 @@
 //! `behaviour_policy run`: the decision node over DDS. Answers DecideAction with an explained
 //! Decision (also published), learns from every SequenceResult and saves that cluster's
-//! Q-table at once. All logic is in `PersistentPolicy`/`PolicyCore`, the conversion of messages in
-//! `behaviour_policy::messages`; this only moves them.
+//! Q-table at once. A cluster whose Q-table file is refused at start-up is unavailable (its
+//! calls are answered ok = false naming the file) while the others serve. All logic is in
+//! `ClusterPolicies`/`PersistentPolicy`/`PolicyCore`; this only moves messages.
 
 use anyhow::Context;
 use behaviour_policy::experiments::{EpochScheme, RunSpec, best_run, train_run};
-use behaviour_policy::messages::{decision_message, transition};
 use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
-use behaviour_policy::{
-    BehaviourPolicyParams, Learning, Mode, PersistentPolicy, QTable, QTableOwner,
-};
+use behaviour_policy::{BehaviourPolicyParams, ClusterPolicies, Learning, Mode, QTable};
 use node_shell::{NodeShell, ShellOptions, header_now};
 use qt_therapy_msgs::DecideActionResponse;
 use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
@@ -21,9 +19,9 @@ fn pretrain(
     model: &UserModelTable,
     learning: Learning,
     params: &BehaviourPolicyParams,
+    (epochs, runs): (usize, usize),
     cluster: usize,
-) -> anyhow::Result<(QTable, String)> {
-    let (epochs, runs) = params.pretraining()?;
+) -> Result<(QTable, String), String> {
     let settings = SessionSettings {
         learning,
         mode: Mode::Explore,
@@ -42,7 +40,7 @@ fn pretrain(
             train_run(&user, &settings, QTable::default(), &spec, seed)
         })
         .collect();
-    let best = best_run(&all).context("no pretraining run")?;
+    let best = best_run(&all).ok_or("pretraining made no run")?;
     let provenance = format!(
         "pretrained by the node: best of {runs} runs x {epochs} epochs x 100 sessions (return \
          {:.3}), reward {}, state lag {}, against {}",
@@ -52,16 +50,6 @@ fn pretrain(
         params.user_model_file
     );
     Ok((all[best].q_table.clone(), provenance))
-}
-
-/// Which Q-table made a decision, for the Decision message.
-fn model_used(p: &PersistentPolicy) -> String {
-    format!(
-        "{} ({}, {} updates)",
-        p.owner(),
-        p.path().display(),
-        p.core().updates()
-    )
 }
 
 pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
@@ -75,42 +63,18 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
                 options.params_path(shell.name()).display()
             )
         })?;
-    let mut policies = Vec::new();
-    for (k, model) in set.tables().iter().enumerate() {
-        let mut pretrained = None;
-        let (p, how) = PersistentPolicy::open(
-            Path::new(&params.q_table_dir),
-            QTableOwner::Cluster(k),
-            learning,
-            params.mode(),
-            params.seed() ^ k as u64,
-            || {
-                let r = pretrain(model, learning, &params, k);
-                let fallback = (QTable::default(), String::new());
-                match r {
-                    Ok(t) => t,
-                    Err(e) => {
-                        pretrained = Some(e);
-                        fallback
-                    }
-                }
-            },
-        )?;
-        if let Some(e) = pretrained {
-            return Err(e);
-        }
-        tracing::info!(cluster = k, file = %p.path().display(), ?how, "Q-table ready");
-        policies.push(p);
-    }
-    let count = policies.len();
-    let default_cluster = params.default_cluster;
-    let cluster_of = move |c: i32| -> anyhow::Result<usize> {
-        let c = if c < 0 { default_cluster } else { i64::from(c) };
-        usize::try_from(c)
-            .ok()
-            .filter(|k| *k < count)
-            .with_context(|| format!("unknown user model cluster {c}: the policy holds {count}"))
-    };
+    // Parameter errors stop the node; a bad Q-table file only makes its cluster unavailable.
+    let pretraining = params.pretraining()?;
+    let models = set.tables();
+    let mut policies = ClusterPolicies::open(
+        Path::new(&params.q_table_dir),
+        models.len(),
+        learning,
+        params.mode(),
+        params.seed(),
+        params.default_cluster,
+        |k| pretrain(&models[k], learning, &params, pretraining, k),
+    );
     {
         let mut calls = shell.serve(DECIDE_ACTION, |e| DecideActionResponse {
             ok: false,
@@ -127,38 +91,29 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
                 _ = &mut stop => break,
                 Some(call) = calls.recv() => {
                     let req = &call.request;
-                    let answer = cluster_of(req.user_model_cluster).and_then(|k| {
-                        let state = req.state.to_state().map_err(|e| anyhow::anyhow!("state: {}", e.reason))?;
-                        let d = policies[k].decide(state, req.step)?;
-                        Ok(decision_message(&d, header_now(), &req.session_id, model_used(&policies[k])))
-                    });
-                    let response = match answer {
+                    let response = match policies.decide(req, header_now()) {
                         Ok(d) => {
                             decisions.send(d.clone());
                             DecideActionResponse { ok: true, error: String::new(), decision: d }
                         }
                         Err(e) => {
-                            tracing::warn!(session = %req.session_id, "refused a decision: {e:#}");
-                            DecideActionResponse { ok: false, error: format!("{e:#}"), ..Default::default() }
+                            tracing::warn!(session = %req.session_id, "refused a decision: {e}");
+                            DecideActionResponse { ok: false, error: e.to_string(), ..Default::default() }
                         }
                     };
                     call.respond(response);
                 }
                 Some(result) = results.recv() => {
-                    let learned = cluster_of(result.user_model_cluster).and_then(|k| {
-                        let learned = policies[k].learn_sequence(
-                            &result.session_id,
-                            result.sequence_index,
-                            &transition(&result)?,
-                        )?;
-                        if learned.is_none() {
-                            tracing::info!(session = %result.session_id, sequence = result.sequence_index,
-                                "already learned from this sequence (sent again after a restart)");
+                    match policies.learn(&result) {
+                        Ok(Some(_)) => {}
+                        Ok(None) => tracing::info!(session = %result.session_id,
+                            sequence = result.sequence_index,
+                            "already learned from this sequence (sent again after a restart)"),
+                        // Logged once per topic and kind of reason (e.g. per unavailable
+                        // cluster), then only counted: a session's results cannot flood the log.
+                        Err(e) => {
+                            drops.record(SEQUENCE_RESULT.name, &format!("not learned from: {e}"));
                         }
-                        Ok(())
-                    });
-                    if let Err(e) = learned {
-                        drops.record(SEQUENCE_RESULT.name, &format!("not learned from: {e:#}"));
                     }
                 }
             }

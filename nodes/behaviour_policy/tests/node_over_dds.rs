@@ -1,0 +1,445 @@
+//! `behaviour_policy run` as a process over DDS, fed bad input (issue 4, "Bad input"): an
+//! unknown cluster, a cluster whose Q-table file is corrupt, states outside the space, NaN
+//! engagement and a result out of place in its session are refused with a clear error, the
+//! corrupt file is never written, and the node keeps serving the good cluster exactly as the
+//! in-process policy does. DDS multicasts, so the test runs itself again inside a private
+//! loopback-only network namespace (tests/loopback-netns), where it starts the node.
+
+use behaviour_policy::messages::transition;
+use behaviour_policy::{
+    BehaviourPolicyParams, Mode, PersistentPolicy, QTable, QTableFile, QTableOwner,
+};
+use qt_therapy_msgs::{BehaviourState, DecideActionRequest, SequenceResult};
+use sequence_game::State;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+/// Set in the copy of this test that runs inside the network namespace.
+const IN_NAMESPACE: &str = "BEHAVIOUR_POLICY_TEST_IN_LOOPBACK_NETNS";
+
+#[test]
+fn the_node_refuses_bad_input_over_dds_and_keeps_serving() {
+    if std::env::var_os(IN_NAMESPACE).is_some() {
+        bad_input_inside_the_namespace();
+        return;
+    }
+    let Some(out) = loopback_netns::rerun_test_inside(
+        "the_node_refuses_bad_input_over_dds_and_keeps_serving",
+        &[(IN_NAMESPACE, "1".as_ref())],
+        Duration::from_secs(120),
+    ) else {
+        return;
+    };
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    println!("{stdout}");
+    assert!(
+        stdout.contains(
+            "over DDS: 4 decisions refused, 7 results not learned, 1 learned, then 1 decision \
+             equal to the in-process policy's; the corrupt file unchanged"
+        ),
+        "{stdout}\n{stderr}"
+    );
+}
+
+/// The node process; killed if the test ends early, so no node outlives a failed run.
+struct NodeProcess(Child);
+
+impl NodeProcess {
+    /// SIGINT (the node's clean shutdown), then its exit status within `deadline`.
+    fn interrupt(&mut self, deadline: Duration) -> std::process::ExitStatus {
+        let sent = Command::new("kill")
+            .args(["-INT", &self.0.id().to_string()])
+            .status()
+            .expect("runs kill");
+        assert!(sent.success(), "kill -INT failed");
+        let started = Instant::now();
+        loop {
+            if let Some(status) = self.0.try_wait().expect("node status") {
+                return status;
+            }
+            assert!(
+                started.elapsed() < deadline,
+                "the node did not stop within {deadline:?} of SIGINT"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for NodeProcess {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A table with distinct values, so a decision shows which table made it.
+fn initial_table() -> QTable {
+    let mut table = QTable::default();
+    for (i, row) in table.q.iter_mut().enumerate() {
+        for (a, q) in row.iter_mut().enumerate() {
+            *q = ((i * 7 + a * 3) % 11) as f64 / 10.0;
+        }
+    }
+    table
+}
+
+fn cluster_0_file() -> QTableFile {
+    QTableFile {
+        owner: QTableOwner::Cluster(0),
+        provenance: "node_over_dds test".into(),
+        updates: 0,
+        learned: BTreeMap::new(),
+        table: initial_table(),
+    }
+}
+
+/// Polls `check` every 50 ms until it gives a value or `deadline` passes.
+async fn wait_for<T>(deadline: Duration, mut check: impl FnMut() -> Option<T>) -> Option<T> {
+    let started = Instant::now();
+    loop {
+        if let Some(v) = check() {
+            return Some(v);
+        }
+        if started.elapsed() > deadline {
+            return None;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// A result the game could send: sequence 1 of `session`, a2 (level 2) from the start state,
+/// solved, engagement 0.5.
+fn good_result(session: &str, cluster: i32) -> SequenceResult {
+    let emotions = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+    let said = emotions(&["happy", "sad", "angry", "happy", "disgusted"]);
+    SequenceResult {
+        session_id: session.into(),
+        user_id: "u1".into(),
+        user_model_cluster: cluster,
+        sequence_index: 1,
+        state: BehaviourState::from_state(State::START),
+        action: 1,
+        level: 2,
+        feedback: 0,
+        sequence: said.clone(),
+        answer: said,
+        outcome: 1,
+        activity_result: 2.0,
+        engagement: 0.5,
+        engagement_per_second: vec![0.25, 0.75],
+        response_time: 3.0,
+        ..Default::default()
+    }
+}
+
+fn request(cluster: i32, step: u8, state: BehaviourState) -> DecideActionRequest {
+    DecideActionRequest {
+        session_id: "good".into(),
+        user_id: "u1".into(),
+        user_model_cluster: cluster,
+        state,
+        step,
+    }
+}
+
+fn bad_input_inside_the_namespace() {
+    use node_shell::{NoParameters, NodeShell, ShellOptions};
+    use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
+
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let user_models = root.join("nodes/user_model/models/migrave_study_c2.json");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let q_tables = dir.path().join("q_tables");
+    std::fs::create_dir_all(&q_tables).expect("mkdir");
+    let good: PathBuf = q_tables.join("cluster_0.json");
+    cluster_0_file().save(&good).expect("writes cluster 0");
+    // Cluster 1: a table cut off mid-way, as a full disk or a crash of another program leaves it.
+    let whole = std::fs::read(&good).expect("reads");
+    let corrupt_bytes = whole[..whole.len() / 2].to_vec();
+    let corrupt = q_tables.join("cluster_1.json");
+    std::fs::write(&corrupt, &corrupt_bytes).expect("writes cluster 1");
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+
+    let node_params = dir.path().join("behaviour_policy.yaml");
+    std::fs::write(
+        &node_params,
+        format!(
+            "behaviour_policy:\n  ros__parameters:\n    user_model_file: {:?}\n    \
+             q_table_dir: {:?}\n",
+            path(&user_models),
+            path(&q_tables)
+        ),
+    )
+    .expect("writes");
+    let probe_params = dir.path().join("probe.yaml");
+    std::fs::write(
+        &probe_params,
+        "behaviour_policy_probe:\n  ros__parameters: {}\n",
+    )
+    .expect("writes");
+    let log = dir.path().join("node.log");
+    let mut node = NodeProcess(
+        Command::new(env!("CARGO_BIN_EXE_behaviour_policy"))
+            .args(["run", "--params-file", &path(&node_params)])
+            .stdout(std::fs::File::create(dir.path().join("node.out")).expect("log"))
+            .stderr(std::fs::File::create(&log).expect("log"))
+            .spawn()
+            .expect("starts behaviour_policy run"),
+    );
+    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+
+    // What the node must do with the valid result and the valid call: the same as this
+    // in-process policy, opened from a copy of the same file with the node's seed.
+    let params = BehaviourPolicyParams::default();
+    let learning = params.learning().expect("learning constants");
+    let expected_dir = dir.path().join("expected");
+    std::fs::create_dir_all(&expected_dir).expect("mkdir");
+    cluster_0_file()
+        .save(&expected_dir.join("cluster_0.json"))
+        .expect("writes");
+    let (mut expected, _) = PersistentPolicy::open(
+        &expected_dir,
+        QTableOwner::Cluster(0),
+        learning,
+        Mode::Exploit,
+        params.seed(),
+        || Err("the file is there".into()),
+    )
+    .expect("opens the copy");
+    let valid = good_result("good", 0);
+    expected
+        .learn_sequence(
+            &valid.session_id,
+            valid.sequence_index,
+            &transition(&valid).expect("valid"),
+        )
+        .expect("learns");
+    let next_state = State::new(2, 0, 2).expect("state after a2 solved");
+    let expected_decision = expected.decide(next_state, 2).expect("decides");
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let (refused_calls, refused_results) = runtime.block_on(async {
+        let options = ShellOptions {
+            params_file: Some(probe_params.clone()),
+            namespace: "/".into(),
+            service_mapping: "enhanced".into(),
+            ..Default::default()
+        };
+        let (mut shell, NoParameters {}) =
+            NodeShell::start("behaviour_policy_probe", &options).expect("probe node");
+        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
+        let mut decisions = shell.subscribe(DECISION, 16).expect("subscription");
+        assert!(
+            shell
+                .wait_for_service(&decide, Duration::from_secs(30))
+                .await,
+            "no DecideAction server:\n{}",
+            node_log()
+        );
+        let timeout = Duration::from_secs(10);
+        let start = BehaviourState::from_state(State::START);
+
+        // Calls the node must answer ok = false, naming what is wrong.
+        let corrupt_path = path(&corrupt);
+        let refused = [
+            (
+                request(5, 1, start.clone()),
+                vec!["unknown user model cluster 5: the policy holds 2"],
+            ),
+            (
+                request(1, 1, start.clone()),
+                vec![
+                    "cluster 1 is unavailable",
+                    corrupt_path.as_str(),
+                    "not JSON",
+                ],
+            ),
+            // Outside the state space: refused by the request's validation, before the policy.
+            (
+                request(
+                    0,
+                    2,
+                    BehaviourState {
+                        level: 4,
+                        feedback: 0,
+                        previous_score: 1,
+                    },
+                ),
+                vec!["DecideAction request: state:"],
+            ),
+            (
+                request(0, 3, start.clone()),
+                vec!["does not fit state", "only step 1 starts from (0, 0, 0)"],
+            ),
+        ];
+        for (call, says) in &refused {
+            let r = decide
+                .call(call.clone(), timeout)
+                .await
+                .expect("answers a bad call");
+            assert!(!r.ok, "{call:?} was answered: {r:?}");
+            for words in says {
+                assert!(r.error.contains(words), "{:?} lacks {words:?}", r.error);
+            }
+        }
+
+        // Results the node must not learn from, then one it must.
+        let bad_results = [
+            SequenceResult {
+                engagement: f32::NAN,
+                engagement_per_second: vec![f32::NAN],
+                ..good_result("bad", 0)
+            },
+            SequenceResult {
+                state: BehaviourState {
+                    level: 0,
+                    feedback: 2,
+                    previous_score: 0,
+                },
+                ..good_result("bad", 0)
+            },
+            // Sequence 1 from a state with a level, with feedback: never the game's first.
+            SequenceResult {
+                state: BehaviourState::from_state(State::new(2, 0, -2).expect("state")),
+                action: 3,
+                feedback: 1,
+                ..good_result("bad", 0)
+            },
+            // A later sequence from the start state.
+            SequenceResult {
+                sequence_index: 4,
+                ..good_result("bad", 0)
+            },
+            good_result("c1", 1),
+            SequenceResult {
+                sequence_index: 2,
+                state: BehaviourState::from_state(State::new(2, 0, 2).expect("state")),
+                ..good_result("c1", 1)
+            },
+            good_result("c5", 5),
+        ];
+        assert!(
+            results
+                .wait_for_subscribers(&shell, Duration::from_secs(30))
+                .await,
+            "the node does not subscribe to {}",
+            SEQUENCE_RESULT.name
+        );
+        for r in &bad_results {
+            assert!(results.send(r.clone()), "publishes");
+        }
+        assert!(results.send(valid.clone()), "publishes");
+        // One reliable writer: when the valid result is learned, every earlier one was handled.
+        let learned = wait_for(Duration::from_secs(20), || {
+            QTableFile::load(&good).ok().filter(|f| f.updates > 0)
+        })
+        .await
+        .unwrap_or_else(|| panic!("the valid result was not learned:\n{}", node_log()));
+        assert_eq!(learned.updates, 1, "{learned:?}");
+        // The same bytes as the in-process policy's file after learning only the valid result.
+        assert_eq!(
+            std::fs::read_to_string(&good).expect("reads"),
+            std::fs::read_to_string(expected.path()).expect("reads"),
+            "cluster 0's file is not the in-process policy's after the valid result alone"
+        );
+
+        // Still serving: the next decision is the in-process policy's.
+        let r = decide
+            .call(
+                request(0, 2, BehaviourState::from_state(next_state)),
+                timeout,
+            )
+            .await
+            .expect("answers a valid call");
+        assert!(r.ok, "{}", r.error);
+        let d = &r.decision;
+        assert_eq!(
+            (
+                d.step,
+                d.action,
+                d.level,
+                d.feedback,
+                d.q_values.clone(),
+                d.probabilities.clone(),
+                d.temperature,
+                d.explored,
+                d.exploitation_only
+            ),
+            (
+                2,
+                expected_decision.action.index() as u8,
+                expected_decision.level.get(),
+                expected_decision.feedback as u8,
+                expected_decision.q_values.to_vec(),
+                expected_decision.probabilities.to_vec(),
+                expected_decision.temperature,
+                expected_decision.explored,
+                true
+            )
+        );
+        assert!(
+            d.model_used.starts_with("cluster 0 (")
+                && d.model_used.ends_with("cluster_0.json, 1 updates)"),
+            "{}",
+            d.model_used
+        );
+        // ...and published as answered (only a decision made is published).
+        let published = tokio::time::timeout(timeout, decisions.recv())
+            .await
+            .expect("a Decision within the deadline")
+            .expect("the subscription is open");
+        assert_eq!(&published, d);
+        drop((decide, results, decisions));
+        shell.stop().await;
+        (refused.len(), bad_results.len())
+    });
+
+    let status = node.interrupt(Duration::from_secs(20));
+    let text = node_log();
+    assert!(status.success(), "the node exited with {status}:\n{text}");
+    assert_eq!(
+        std::fs::read(&corrupt).expect("reads"),
+        corrupt_bytes,
+        "the corrupt file was written"
+    );
+    let mut names: Vec<String> = std::fs::read_dir(&q_tables)
+        .expect("lists")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["cluster_0.json", "cluster_1.json"]);
+
+    // The node said why, once per kind of refusal.
+    let count = |words: &str| text.matches(words).count();
+    for (words, times) in [
+        (format!("Q-table refused: {}", path(&corrupt)), 1),
+        ("not learned from: cluster 1 is unavailable".into(), 1),
+        ("SequenceResult: engagement = NaN".into(), 1),
+        ("SequenceResult: state:".into(), 1),
+        (
+            "not learned from: sequence 1 took a4 encourage: feedback is not allowed".into(),
+            1,
+        ),
+        (
+            "not learned from: sequence 4 starts from (L=0, F=0, PS=+0)".into(),
+            1,
+        ),
+        ("not learned from: unknown user model cluster 5".into(), 1),
+        ("DecideAction request: state:".into(), 1),
+    ] {
+        assert_eq!(count(&words), times, "{words:?} in the node's log:\n{text}");
+    }
+    println!(
+        "over DDS: {refused_calls} decisions refused, {refused_results} results not learned, 1 \
+         learned, then 1 decision equal to the in-process policy's; the corrupt file unchanged"
+    );
+}
