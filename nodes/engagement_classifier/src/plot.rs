@@ -13,6 +13,7 @@ const FONT: &str = "DejaVu Sans, sans-serif";
 #[derive(Debug, Clone, Copy)]
 pub struct EngagementPlot<'a> {
     pub title: &'a str,
+    /// Start of each second drawn, ascending (gaps allowed).
     pub seconds: &'a [f64],
     /// Per-second expected engagement (NaN: no face that second); drawn thin.
     pub engagement: &'a [f64],
@@ -44,18 +45,35 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> PlotError {
     PlotError::Draw(format!("{e:?}"))
 }
 
-/// Runs of consecutive finite points, so seconds without a face leave gaps in the line.
+/// Runs of consecutive finite points, so seconds without a face leave gaps in the line, and
+/// so do seconds never reported (a camera that went silent): no line bridges them.
 fn segments(xs: &[f64], ys: &[f64]) -> Vec<Vec<(f64, f64)>> {
     let mut out: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
     for (&x, &y) in xs.iter().zip(ys) {
-        match out.last_mut() {
-            Some(run) if y.is_finite() => run.push((x, y)),
-            Some(run) if !run.is_empty() => out.push(Vec::new()),
-            _ => {}
+        let Some(run) = out.last_mut() else { break };
+        let silent_before = run.last().is_some_and(|&(previous, _)| x - previous > 1.5);
+        match (y.is_finite(), silent_before) {
+            (true, false) => run.push((x, y)),
+            (true, true) => out.push(vec![(x, y)]),
+            (false, _) if !run.is_empty() => out.push(Vec::new()),
+            (false, _) => {}
         }
     }
     out.retain(|r| !r.is_empty());
     out
+}
+
+/// Index of the second drawn nearest to `t` (the later one on a tie). By time, not by
+/// position: a session's seconds need not start at 0 nor follow one another without gaps.
+/// `seconds` is ascending and not empty.
+fn nearest_second(seconds: &[f64], t: f64) -> usize {
+    let after = seconds.partition_point(|&s| s < t);
+    match (after.checked_sub(1), seconds.get(after)) {
+        (Some(before), Some(&s)) if t - seconds[before] < s - t => before,
+        (_, Some(_)) => after,
+        (Some(before), None) => before,
+        (None, None) => 0,
+    }
 }
 
 /// Draws the figure as an SVG document.
@@ -126,8 +144,7 @@ pub fn engagement_svg(plot: &EngagementPlot<'_>) -> Result<String, PlotError> {
         }
         // A cross sits on the smoothed curve at the second of the answer (on 0 if none).
         let value_at = |t: f64| {
-            let i = (t.round().max(0.0) as usize).min(n - 1);
-            Some(plot.smoothed[i])
+            Some(plot.smoothed[nearest_second(plot.seconds, t)])
                 .filter(|v| v.is_finite())
                 .unwrap_or(0.0)
         };
@@ -181,6 +198,29 @@ mod tests {
             &[0.1, f64::NAN, 0.2, 0.3, f64::NAN],
         );
         assert_eq!(runs, vec![vec![(0.0, 0.1)], vec![(2.0, 0.2), (3.0, 0.3)]]);
+        // Seconds 3 to 6 never reported.
+        let runs = segments(&[0.0, 1.0, 2.0, 7.0, 8.0], &[0.1, 0.2, 0.3, 0.4, 0.5]);
+        assert_eq!(
+            runs,
+            vec![
+                vec![(0.0, 0.1), (1.0, 0.2), (2.0, 0.3)],
+                vec![(7.0, 0.4), (8.0, 0.5)]
+            ]
+        );
+    }
+
+    #[test]
+    fn an_answer_finds_its_second_by_time() {
+        // Contiguous seconds from 0: as rounding the time (ties go to the later second).
+        let contiguous: Vec<f64> = (0..5).map(f64::from).collect();
+        for (t, want) in [(-3.0, 0), (0.4, 0), (1.5, 2), (2.6, 3), (9.0, 4)] {
+            assert_eq!(nearest_second(&contiguous, t), want, "t = {t}");
+        }
+        // A source first seen at 5 s, silent from 7 s to 10 s.
+        let gappy = [5.0, 6.0, 7.0, 10.0, 11.0];
+        for (t, want) in [(1.0, 0), (6.2, 1), (8.4, 2), (8.6, 3), (10.4, 3), (30.0, 4)] {
+            assert_eq!(nearest_second(&gappy, t), want, "t = {t}");
+        }
     }
 
     #[test]

@@ -7,6 +7,7 @@ use engagement_classifier::table::{
     LoadOptions, NeutralLabel, load_labelled_csv, read_feature_csv,
 };
 use engagement_classifier::train::{TrainParams, to_model_file, train};
+use engagement_classifier::xgboost_json::parse_base_score;
 use std::path::{Path, PathBuf};
 
 fn fixture(name: &str) -> PathBuf {
@@ -77,6 +78,28 @@ fn python_model_with_stored_preprocessing_matches_xgboost_on_raw_rows() {
     assert!(model.preprocessing().is_some());
     let (dm, dp) = check_model(&model, "xgb_preprocessed_expected.csv");
     eprintln!("preprocessed: max |margin diff| {dm:e}, max |p diff| {dp:e}");
+}
+
+/// Every other fixture has base_score 0.5 (balanced labels), where logit(base_score) = 0 and
+/// a wrong intercept would go unseen. Trained on 1 positive label in 5, xgboost fits
+/// base_score from the labels.
+#[test]
+fn python_model_with_a_fitted_base_score_matches_xgboost() {
+    let path = fixture("xgb_unbalanced.json");
+    let text = std::fs::read_to_string(&path).expect("fixture exists");
+    let file: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let stored = file["learner"]["learner_model_param"]["base_score"]
+        .as_str()
+        .expect("base_score is a string");
+    let base_score = parse_base_score(stored).expect("base_score parses");
+    assert!(
+        (base_score - 0.5).abs() > 0.1,
+        "base_score {stored} is not fitted away from 0.5"
+    );
+    let model = EngagementModel::from_json(&text, &path).expect("loads");
+    assert_eq!(model.tree_count(), 100);
+    let (dm, dp) = check_model(&model, "xgb_unbalanced_expected.csv");
+    eprintln!("base_score {stored}: max |margin diff| {dm:e}, max |p diff| {dp:e}");
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! The session report: what happened in one session, for the therapist and the researcher.
 //! It takes the messages a session produced (from a bag or live), and writes one
 //! self-contained HTML page with plots: level and score per sequence, expected engagement over
-//! time with the answers and stage ends (the paper's Fig. 2), and every decision with its
-//! Q-values and whether the robot explored.
+//! time with the answers and stage ends (the paper's Fig. 2; one figure per camera / face),
+//! and every decision with its Q-values and whether the robot explored.
 
 use engagement_classifier::plot::{EngagementPlot, engagement_svg};
 use plotters::prelude::*;
@@ -211,58 +211,121 @@ pub fn levels_svg(log: &SessionLog) -> Result<String, ReportError> {
     Ok(svg)
 }
 
-/// Expected engagement over the session with answers and stage ends (paper's Fig. 2).
-pub fn engagement_over_time_svg(
-    log: &SessionLog,
-    title: &str,
-) -> Result<Option<String>, ReportError> {
-    let Some(first) = log.engagement.first() else {
-        return Ok(None);
+/// The paper's Fig. 2 for one source of faces (camera / face): its expected engagement per
+/// second, with the session's answers and stage ends. Every source's figure shares one time
+/// axis, so several cameras are compared second by second instead of mixed into one curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EngagementFigure {
+    /// `ExpectedEngagement.source`: "<camera frame_id>/<face_id>".
+    pub source: String,
+    /// Time zero of every figure of the session (ns since the epoch): the earliest of its first
+    /// game state, its first result and any source's first second.
+    pub start_ns: i64,
+    /// Start of each of this source's seconds, ascending, in seconds since `start_ns`.
+    pub seconds: Vec<f64>,
+    /// Mean per second (NaN: no face that second).
+    pub engagement: Vec<f64>,
+    /// Smoothed mean per second (NaN: no face that second).
+    pub smoothed: Vec<f64>,
+    /// When each sequence's result came (the child answered, or the task timed out).
+    pub answers: Vec<f64>,
+    /// The last result of each stage (a run of sequences at one level) and its sequence length.
+    pub stage_ends: Vec<(f64, u8)>,
+}
+
+impl EngagementFigure {
+    /// Seconds in which this source saw a valid face.
+    pub fn seconds_with_faces(&self) -> usize {
+        self.engagement.iter().filter(|v| v.is_finite()).count()
+    }
+}
+
+/// One figure per source, in the order the sources first appear in the log; none without
+/// expected-engagement messages.
+pub fn engagement_figures(log: &SessionLog) -> Vec<EngagementFigure> {
+    let Some(start_ns) = log
+        .engagement
+        .iter()
+        .map(|e| e.window_start.to_nanos())
+        .min()
+        .map(|first_second| {
+            log.states
+                .first()
+                .map(|s| s.header.stamp.to_nanos())
+                .into_iter()
+                .chain(log.results.iter().map(|r| r.header.stamp.to_nanos()))
+                .fold(first_second, i64::min)
+        })
+    else {
+        return Vec::new();
     };
-    let t0 = first.window_start.as_secs_f64();
-    let seconds: Vec<f64> = log
-        .engagement
-        .iter()
-        .map(|e| e.window_start.as_secs_f64() - t0)
-        .collect();
-    let value = |e: &ExpectedEngagement, v: f32| if e.has_faces { f64::from(v) } else { f64::NAN };
-    let engagement: Vec<f64> = log.engagement.iter().map(|e| value(e, e.mean)).collect();
-    let smoothed: Vec<f64> = log
-        .engagement
-        .iter()
-        .map(|e| value(e, e.smoothed))
-        .collect();
+    // Differences of integer nanoseconds: no f64 rounding of epoch times.
+    let since_start = |ns: i64| (ns - start_ns) as f64 / 1e9;
     let answers: Vec<f64> = log
         .results
         .iter()
-        .map(|r| r.header.stamp.as_secs_f64() - t0)
+        .map(|r| since_start(r.header.stamp.to_nanos()))
         .collect();
     // A stage ends where the next sequence has another level.
     let stage_ends: Vec<(f64, u8)> = log
         .results
         .windows(2)
         .filter(|w| w[0].level != w[1].level)
-        .map(|w| (w[0].header.stamp.as_secs_f64() - t0, 2 * w[0].level + 1))
-        .chain(
-            log.results
-                .last()
-                .map(|r| (r.header.stamp.as_secs_f64() - t0, 2 * r.level + 1)),
-        )
+        .map(|w| &w[0])
+        .chain(log.results.last())
+        .map(|r| (since_start(r.header.stamp.to_nanos()), 2 * r.level + 1))
         .collect();
+    let mut sources: Vec<&str> = Vec::new();
+    for e in &log.engagement {
+        if !sources.contains(&e.source.as_str()) {
+            sources.push(&e.source);
+        }
+    }
+    sources
+        .into_iter()
+        .map(|source| {
+            let mut seconds: Vec<&ExpectedEngagement> = log
+                .engagement
+                .iter()
+                .filter(|e| e.source == source)
+                .collect();
+            seconds.sort_by_key(|e| e.window_start.to_nanos());
+            let value = |e: &ExpectedEngagement, v: f32| {
+                if e.has_faces { f64::from(v) } else { f64::NAN }
+            };
+            EngagementFigure {
+                source: source.to_string(),
+                start_ns,
+                seconds: seconds
+                    .iter()
+                    .map(|e| since_start(e.window_start.to_nanos()))
+                    .collect(),
+                engagement: seconds.iter().map(|e| value(e, e.mean)).collect(),
+                smoothed: seconds.iter().map(|e| value(e, e.smoothed)).collect(),
+                answers: answers.clone(),
+                stage_ends: stage_ends.clone(),
+            }
+        })
+        .collect()
+}
+
+/// Draws one source's figure (the paper's Fig. 2) as SVG.
+pub fn engagement_over_time_svg(
+    figure: &EngagementFigure,
+    title: &str,
+) -> Result<String, ReportError> {
     let plot = EngagementPlot {
         title,
-        seconds: &seconds,
-        engagement: &engagement,
-        smoothed: &smoothed,
-        answers: &answers,
-        stage_ends: &stage_ends,
+        seconds: &figure.seconds,
+        engagement: &figure.engagement,
+        smoothed: &figure.smoothed,
+        answers: &figure.answers,
+        stage_ends: &figure.stage_ends,
     };
-    engagement_svg(&plot)
-        .map(Some)
-        .map_err(|e| ReportError::Draw {
-            figure: "engagement",
-            reason: e.to_string(),
-        })
+    engagement_svg(&plot).map_err(|e| ReportError::Draw {
+        figure: "engagement",
+        reason: e.to_string(),
+    })
 }
 
 fn escape(s: &str) -> String {
@@ -316,10 +379,27 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
         s.explored
     );
     html.push_str(&levels_svg(log)?);
-    if let Some(svg) = engagement_over_time_svg(log, "Expected engagement over the session")? {
-        html.push_str(&svg);
-    } else {
+    let figures = engagement_figures(log);
+    if figures.is_empty() {
         html.push_str("<p>No expected-engagement messages were recorded.</p>");
+    }
+    if figures.len() > 1 {
+        let _ = write!(
+            html,
+            "<p>{} sources (camera / face) sent faces: one figure each, on one time axis.</p>",
+            figures.len()
+        );
+    }
+    for figure in &figures {
+        let _ = write!(
+            html,
+            "<h2>Expected engagement of {}</h2><p>{} of {} seconds with a face.</p>",
+            escape(&figure.source),
+            figure.seconds_with_faces(),
+            figure.seconds.len()
+        );
+        let title = format!("Expected engagement over the session: {}", figure.source);
+        html.push_str(&engagement_over_time_svg(figure, &title)?);
     }
     html.push_str(
         "<h2>Sequences and decisions</h2><table><tr><th>#</th><th>state (L,F,PS)</th><th>action</th>\
@@ -437,6 +517,71 @@ mod tests {
             SessionLog::default().summary(),
             Err(ReportError::Empty)
         ));
+    }
+
+    fn second(source: &str, sec: i32, has_faces: bool, mean: f32) -> ExpectedEngagement {
+        ExpectedEngagement {
+            source: source.into(),
+            window_start: Time { sec, nanosec: 0 },
+            window_end: Time {
+                sec: sec + 1,
+                nanosec: 0,
+            },
+            has_faces,
+            mean,
+            smoothed: mean / 2.0,
+            frame_count: if has_faces { 30 } else { 0 },
+            missing_count: if has_faces { 0 } else { 30 },
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn each_source_gets_its_own_curve_on_one_time_axis() {
+        // Two cameras interleaved as the classifier publishes them: "front/0" from 100 s,
+        // engaged; "side/0" from 103 s, disengaged, no face in its second second, silent
+        // from 106 s to 108 s.
+        let mut engagement = Vec::new();
+        for sec in 100..110 {
+            engagement.push(second("front/0", sec, true, 0.6));
+            if (103..106).contains(&sec) || sec >= 108 {
+                engagement.push(second("side/0", sec, sec != 104, -0.4));
+            }
+        }
+        let log = SessionLog {
+            results: vec![
+                result(1, 1, 1, 102),
+                result(2, 1, 1, 105),
+                result(3, 2, -1, 109),
+            ],
+            engagement,
+            ..Default::default()
+        };
+        let figures = engagement_figures(&log);
+        let sources: Vec<&str> = figures.iter().map(|f| f.source.as_str()).collect();
+        assert_eq!(sources, ["front/0", "side/0"]);
+        let (front, side) = (&figures[0], &figures[1]);
+        assert_eq!(front.start_ns, 100_000_000_000);
+        assert_eq!(side.start_ns, front.start_ns);
+        assert_eq!(front.seconds, (0..10).map(f64::from).collect::<Vec<_>>());
+        assert!(front.engagement.iter().all(|&v| v == f64::from(0.6f32)));
+        assert!(front.smoothed.iter().all(|&v| v == f64::from(0.3f32)));
+        assert_eq!(side.seconds, [3.0, 4.0, 5.0, 8.0, 9.0]);
+        assert_eq!(side.seconds_with_faces(), 4);
+        assert!(side.engagement[1].is_nan() && side.smoothed[1].is_nan());
+        for (i, &v) in side.engagement.iter().enumerate().filter(|&(i, _)| i != 1) {
+            assert_eq!(v, f64::from(-0.4f32), "second {i}");
+        }
+        // The session's answers and stage ends are the same on both time axes.
+        for f in &figures {
+            assert_eq!(f.answers, [2.0, 5.0, 9.0]);
+            assert_eq!(f.stage_ends, [(5.0, 3), (9.0, 5)]);
+        }
+        let html = report_html(&log).expect("report");
+        assert_eq!(html.matches("<svg").count(), 3, "levels + one per source");
+        assert!(html.contains("Expected engagement of front/0</h2><p>10 of 10 seconds"));
+        assert!(html.contains("Expected engagement of side/0</h2><p>4 of 5 seconds"));
+        assert!(html.contains("2 sources (camera / face)"));
     }
 
     #[test]

@@ -7,6 +7,7 @@ use engagement_classifier::messages::Sources;
 use engagement_classifier::{
     EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome,
 };
+use node_shell::params::{apply_overrides, parameters_from_map, read_parameter_map};
 use node_shell::{NodeShell, Outbox, ShellOptions};
 use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, OPENFACE_FEATURES};
 use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement};
@@ -27,16 +28,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .block_on(serve(args))
 }
 
+const NODE: &str = "engagement_classifier";
+
+/// The parameters and the model, read before the node joins the ROS graph: a bad parameter or
+/// model file stops it at start-up without it ever appearing to its peers.
+fn set_up(
+    options: &ShellOptions,
+) -> anyhow::Result<(EngagementClassifierParams, EngagementEstimator)> {
+    let name = options.node_name.as_deref().unwrap_or(NODE);
+    let path = options.params_path(name);
+    let mut map = read_parameter_map(&path, name)?;
+    apply_overrides(&mut map, &options.param_overrides, &path, name)?;
+    let params: EngagementClassifierParams = parameters_from_map(map, &path, name)?;
+    let estimator = EngagementEstimator::from_params(&params, Path::new("."))
+        .with_context(|| format!("setting up from {}", path.display()))?;
+    Ok((params, estimator))
+}
+
 async fn serve(args: Args) -> anyhow::Result<()> {
-    let (mut shell, params): (NodeShell, EngagementClassifierParams) =
-        NodeShell::start("engagement_classifier", &args.shell)?;
-    let mut estimator =
-        EngagementEstimator::from_params(&params, Path::new(".")).with_context(|| {
-            format!(
-                "setting up from {}",
-                args.shell.params_path(shell.name()).display()
-            )
-        })?;
+    let (params, mut estimator) = set_up(&args.shell)?;
+    // The shell reads the same file and overrides again; those parameters are already checked.
+    let (mut shell, _): (NodeShell, EngagementClassifierParams) =
+        NodeShell::start(NODE, &args.shell)?;
     tracing::info!(model = %params.model_file, trees = estimator.model().tree_count(), "model loaded");
     {
         let mut frames = shell.subscribe(OPENFACE_FEATURES, 512)?;
