@@ -21,27 +21,20 @@ const IN_NAMESPACE: &str = "BEHAVIOUR_POLICY_TEST_IN_LOOPBACK_NETNS";
 
 #[test]
 fn the_node_refuses_bad_input_over_dds_and_keeps_serving() {
-    if std::env::var_os(IN_NAMESPACE).is_some() {
-        bad_input_inside_the_namespace();
-        return;
-    }
-    let Some(out) = loopback_netns::rerun_test_inside(
+    let Some(stdout) = loopback_netns::test_inside_namespace(
         "the_node_refuses_bad_input_over_dds_and_keeps_serving",
-        &[(IN_NAMESPACE, "1".as_ref())],
+        IN_NAMESPACE,
         Duration::from_secs(120),
+        bad_input_inside_the_namespace,
     ) else {
         return;
     };
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
-    println!("{stdout}");
     assert!(
         stdout.contains(
             "over DDS: 4 decisions refused, 7 results not learned, 1 learned, then 1 decision \
              equal to the in-process policy's; the corrupt file unchanged"
         ),
-        "{stdout}\n{stderr}"
+        "{stdout}"
     );
 }
 

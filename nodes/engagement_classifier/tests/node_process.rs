@@ -117,21 +117,15 @@ const IN_NAMESPACE: &str = "ENGAGEMENT_CLASSIFIER_TEST_IN_LOOPBACK_NETNS";
 /// loopback-only namespace (tests/loopback-netns).
 #[test]
 fn bad_frames_over_dds_are_dropped_and_the_node_goes_on_classifying() {
-    if std::env::var_os(IN_NAMESPACE).is_some() {
-        bad_frames_inside_the_namespace();
-        return;
-    }
-    let Some(out) = loopback_netns::rerun_test_inside(
+    let Some(stdout) = loopback_netns::test_inside_namespace(
         "bad_frames_over_dds_are_dropped_and_the_node_goes_on_classifying",
-        &[(IN_NAMESPACE, "1".as_ref())],
+        IN_NAMESPACE,
         Duration::from_secs(120),
+        bad_frames_inside_the_namespace,
     ) else {
         return;
     };
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
-    assert!(stdout.contains("over DDS:"), "{stdout}\n{stderr}");
+    assert!(stdout.contains("over DDS:"), "{stdout}");
     println!("{stdout}");
 }
 

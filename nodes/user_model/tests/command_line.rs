@@ -298,24 +298,17 @@ const IN_NAMESPACE: &str = "USER_MODEL_TEST_IN_LOOPBACK_NETNS";
 /// (tests/loopback-netns), where it starts the node and calls it.
 #[test]
 fn the_node_answers_over_dds_as_the_model_does_in_process() {
-    if std::env::var_os(IN_NAMESPACE).is_some() {
-        node_over_dds_inside_the_namespace();
-        return;
-    }
-    let Some(out) = loopback_netns::rerun_test_inside(
+    let Some(stdout) = loopback_netns::test_inside_namespace(
         "the_node_answers_over_dds_as_the_model_does_in_process",
-        &[(IN_NAMESPACE, "1".as_ref())],
+        IN_NAMESPACE,
         std::time::Duration::from_secs(120),
+        node_over_dds_inside_the_namespace,
     ) else {
         return;
     };
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
-    println!("{stdout}");
     assert!(
         stdout.contains("over DDS: 252 predictions and 20 cluster assignments equal"),
-        "{stdout}\n{stderr}"
+        "{stdout}"
     );
 }
 

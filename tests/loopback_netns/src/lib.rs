@@ -85,6 +85,29 @@ pub fn rerun_test_inside(name: &str, env: &[(&str, &OsStr)], deadline: Duration)
     Some(wait_with_backstop(child, deadline))
 }
 
+/// The whole shape of a test that runs itself again inside a namespace. In the copy running
+/// inside (`marker` set in its environment) it calls `inside` and returns None. Outside it
+/// reruns the test `name` inside with `marker` set, asserts that run passed (showing its
+/// output if not), prints its stdout and returns it. None (after saying why) where namespaces
+/// cannot be made.
+pub fn test_inside_namespace(
+    name: &str,
+    marker: &str,
+    deadline: Duration,
+    inside: impl FnOnce(),
+) -> Option<String> {
+    if std::env::var_os(marker).is_some() {
+        inside();
+        return None;
+    }
+    let out = rerun_test_inside(name, &[(marker, "1".as_ref())], deadline)?;
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    println!("{stdout}");
+    Some(stdout)
+}
+
 /// `timeout` inside the namespace enforces the deadline; this is the backstop.
 fn wait_with_backstop(mut child: std::process::Child, deadline: Duration) -> Output {
     let started = Instant::now();
