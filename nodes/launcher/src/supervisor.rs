@@ -93,6 +93,12 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration) -> anyhow::Result<i32
     let mut running: HashMap<String, u32> = HashMap::new();
     let mut restarts: HashMap<String, u32> = HashMap::new();
     let mut failed = false;
+    // Our handlers before any node starts: a Ctrl-C during start-up stops the nodes instead of
+    // killing the launcher alone, and the nodes start with SIGINT and SIGTERM at their default
+    // (a handled signal resets on exec, an ignored one would not: a launcher started from a
+    // script's background job ignores SIGINT, and so then did every node that is not ours).
+    let mut interrupt = signal(SignalKind::interrupt())?;
+    let mut terminate = signal(SignalKind::terminate())?;
     for spec in &specs {
         match start(spec, tx.clone()) {
             Ok(pid) => {
@@ -117,8 +123,6 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration) -> anyhow::Result<i32
         stop_all(&mut running, &mut rx, grace).await;
         return Ok(1);
     }
-    let mut interrupt = signal(SignalKind::interrupt())?;
-    let mut terminate = signal(SignalKind::terminate())?;
     let mut exit_code = 0;
     loop {
         if running.is_empty() && !by_name.values().any(|s| s.respawn) {
