@@ -66,6 +66,28 @@ impl ShellOptions {
             None => PathBuf::from("params").join(format!("{node_name}.yaml")),
         }
     }
+
+    /// The node's name: `--node-name`, else `default_name`.
+    pub fn node_name_or(&self, default_name: &str) -> String {
+        self.node_name
+            .clone()
+            .unwrap_or_else(|| default_name.to_string())
+    }
+
+    /// The node's parameters as `NodeShell::start` reads them (its file, then the `--param`
+    /// overrides, into `P`), and the file's path: for a node that must check them before it
+    /// joins the graph.
+    pub fn parameters<P: DeserializeOwned>(
+        &self,
+        default_name: &str,
+    ) -> anyhow::Result<(P, PathBuf)> {
+        let name = self.node_name_or(default_name);
+        let path = self.params_path(&name);
+        let mut map = read_parameter_map(&path, &name)?;
+        apply_overrides(&mut map, &self.param_overrides, &path, &name)?;
+        let params = parameters_from_map(map, &path, &name)?;
+        Ok((params, path))
+    }
 }
 
 /// ROS_DOMAIN_ID, 0 when unset; values outside 0..=232 are an error.
@@ -214,15 +236,9 @@ impl NodeShell {
         default_name: &str,
         options: &ShellOptions,
     ) -> anyhow::Result<(NodeShell, P)> {
-        let name = options
-            .node_name
-            .clone()
-            .unwrap_or_else(|| default_name.to_string());
+        let name = options.node_name_or(default_name);
         let sink = init_logging(&name);
-        let params_path = options.params_path(&name);
-        let mut map = read_parameter_map(&params_path, &name)?;
-        apply_overrides(&mut map, &options.param_overrides, &params_path, &name)?;
-        let params: P = parameters_from_map(map, &params_path, &name)?;
+        let (params, params_path): (P, _) = options.parameters(default_name)?;
         let service_mapping = match options.service_mapping.to_ascii_lowercase().as_str() {
             "enhanced" => ServiceMapping::Enhanced,
             "cyclone" => ServiceMapping::Cyclone,

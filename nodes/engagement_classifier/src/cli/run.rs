@@ -7,7 +7,6 @@ use engagement_classifier::messages::Sources;
 use engagement_classifier::{
     EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome,
 };
-use node_shell::params::{apply_overrides, parameters_from_map, read_parameter_map};
 use node_shell::{NodeShell, Outbox, ShellOptions};
 use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, OPENFACE_FEATURES};
 use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement};
@@ -35,11 +34,7 @@ const NODE: &str = "engagement_classifier";
 fn set_up(
     options: &ShellOptions,
 ) -> anyhow::Result<(EngagementClassifierParams, EngagementEstimator)> {
-    let name = options.node_name.as_deref().unwrap_or(NODE);
-    let path = options.params_path(name);
-    let mut map = read_parameter_map(&path, name)?;
-    apply_overrides(&mut map, &options.param_overrides, &path, name)?;
-    let params: EngagementClassifierParams = parameters_from_map(map, &path, name)?;
+    let (params, path): (EngagementClassifierParams, _) = options.parameters(NODE)?;
     let estimator = EngagementEstimator::from_params(&params, Path::new("."))
         .with_context(|| format!("setting up from {}", path.display()))?;
     Ok((params, estimator))
