@@ -457,7 +457,11 @@ impl GameDriver {
             Output::SetTimer { id, at_ns } => {
                 self.timers.insert((at_ns, id));
             }
-            Output::Record(_) | Output::Summary(_) | Output::LiveLine(_) | Output::Log { .. } => {}
+            Output::Record(_)
+            | Output::Journal(_)
+            | Output::Summary(_)
+            | Output::LiveLine(_)
+            | Output::Log { .. } => {}
         }
     }
 

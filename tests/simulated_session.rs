@@ -1,17 +1,21 @@
 //! The main job as a test: every node of the suite as its own process over DDS in one loopback
 //! namespace, a simulated child, the recorder; the session must run its 10 sequences, the bag
 //! must hold them in order with their decisions and per-second engagement, and the report must
-//! be written. Then the same session with four nodes killed (SIGKILL) and respawned mid-session:
+//! be written. Then the same session with six nodes killed (SIGKILL) and respawned mid-session:
 //! each loss seen within the timeout, the robot silent while held, the session resumed and
-//! whole, the policy's Q-table carried over. And five sessions back to back (the soak's
-//! short version): every reliable message counted, nothing lost, duplicated or growing.
+//! whole, the policy's Q-table carried over; the game manager's own respawn takes the session
+//! over from its files and goes on at the therapist's resume, nothing played or done twice.
+//! And five sessions back to back (the soak's short version): every reliable message counted,
+//! nothing lost, duplicated or growing.
 
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{
     DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH,
-    SEQUENCE_RESULT, TABLET_TASK,
+    SEQUENCE_RESULT, TABLET_TASK, THERAPIST_COMMAND,
 };
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask};
+use qt_therapy_msgs::{
+    Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, TherapistCommand,
+};
 use std::path::Path;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -212,8 +216,28 @@ fn sessions_back_to_back_lose_nothing() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// The game manager's node_loss_timeout_s (params/game_manager.yaml).
+/// The game manager's node_loss_timeout_s (params/game_manager.yaml), and the tablet bridge's
+/// game_manager_loss_timeout_s (params/tablet_bridge.yaml).
 const LOSS_TIMEOUT_S: f64 = 4.0;
+
+/// Kills the game manager with SIGKILL once the console printed sequence `after`'s line; the
+/// tablet bridge must show it lost; the launcher respawns it 5 s later and it takes the session
+/// over, paused; then the therapist resumes it from a second console, as on the tablet.
+fn kill_game_manager_step(after: u8, bin: &str) -> String {
+    format!(
+        r#"wait_for '^\[therapist\] seq +{after} ' || fail
+pid=$(grep -oE "(started|restarted) game_manager \(pid [0-9]+\)" "$o/stderr.log" | tail -1 | grep -oE '[0-9]+')
+[ -n "$pid" ] || {{ echo "no pid for game_manager"; fail; }}
+echo "killed game_manager pid $pid at $EPOCHREALTIME"
+kill -KILL "$pid"
+wait_for 'game manager lost' "$o/stderr.log" && echo "bridge showed game_manager lost at $EPOCHREALTIME"
+wait_for 'recovered after a game manager restart' || fail
+session=$(grep -oE '^\[therapist\] session [^ ]+ started' "$o/stdout.log" | head -1 | cut -d' ' -f3)
+ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR=params {bin}/therapist resume --session "$session" > "$o/resume.log" 2>&1 || {{ cat "$o/resume.log"; fail; }}
+echo "resumed session $session at $EPOCHREALTIME"
+"#
+    )
+}
 
 /// Kills `node` with SIGKILL once the console printed sequence `after`'s line, then waits
 /// until the game manager says it is back (the launcher respawns it 5 s later).
@@ -243,14 +267,21 @@ fn a_session_survives_sigkilled_nodes() {
     let kills = [
         ("behaviour_policy", 1),
         ("bag_recorder", 3),
+        ("game_manager", 4),
         ("engagement_classifier", 5),
         ("user_model", 7),
         ("tablet_bridge", 8),
     ];
-    let steps: String = kills.iter().map(|(n, a)| kill_step(n, *a)).collect();
+    let steps: String = kills
+        .iter()
+        .map(|(n, a)| match *n {
+            "game_manager" => kill_game_manager_step(*a, &bin),
+            _ => kill_step(n, *a),
+        })
+        .collect();
     let script = format!(
         r#"o={o}
-wait_for() {{ for _ in $(seq 1 1200); do grep -qE -- "$1" "$o/stdout.log" && return 0; sleep 0.05; done; echo "no line matching $1 within 60 s"; return 1; }}
+wait_for() {{ for _ in $(seq 1 1200); do grep -qE -- "$1" "${{2:-$o/stdout.log}}" && return 0; sleep 0.05; done; echo "no line matching $1 within 60 s"; return 1; }}
 {} tests/reliability/kill_session.launch.yaml bin:={bin} out:=$o time_scale:=0.1 > $o/stdout.log 2> $o/stderr.log &
 launch=$!
 fail() {{ kill -INT $launch; wait $launch; echo "launch_exit=failed"; exit 1; }}
@@ -280,13 +311,32 @@ echo "launch_exit=$?"
     let stdout = read("stdout.log");
     assert!(stdout.contains("finished: 10 sequences"), "{context}");
 
-    // The session files: ten records, one per sequence, and a finished summary.
-    let jsonl = std::fs::read_dir(&out)
+    // The session files: one session (the respawned game manager went on in its files), ten
+    // records, one per sequence, and a finished summary.
+    let jsonls: Vec<std::path::PathBuf> = std::fs::read_dir(&out)
         .expect("out dir")
         .filter_map(Result::ok)
         .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|x| x == "jsonl"))
-        .expect("a session file");
+        .filter(|p| p.extension().is_some_and(|x| x == "jsonl"))
+        .collect();
+    assert_eq!(jsonls.len(), 1, "one session file: {jsonls:?}\n{context}");
+    let jsonl = jsonls[0].clone();
+    let session_id = script_out
+        .lines()
+        .find_map(|l| l.strip_prefix("resumed session "))
+        .and_then(|r| r.split(" at ").next())
+        .unwrap_or_else(|| panic!("no resume: {context}"))
+        .to_string();
+    assert_eq!(
+        jsonl.file_stem().and_then(|s| s.to_str()),
+        Some(session_id.as_str())
+    );
+    let journal = std::fs::read_to_string(jsonl.with_extension("journal")).expect("journal");
+    assert_eq!(
+        journal.matches(r#""entry":"recovered""#).count(),
+        1,
+        "{journal}"
+    );
     let records = suite_tests::json_lines(&std::fs::read_to_string(&jsonl).expect("read"));
     let indices: Vec<u64> = records
         .iter()
@@ -308,13 +358,57 @@ echo "launch_exit=$?"
         .map(|m| m.message.sequence_index)
         .collect();
     assert_eq!(results, (1..=10).collect::<Vec<u8>>(), "{context}");
-    let tasks: Vec<u8> = reader
+    let states = reader
+        .messages::<GameState>(GAME_STATE.name)
+        .expect("game states");
+    // The sequence the game manager's kill interrupted: the respawn took the session over
+    // there, after every result published before the kill.
+    let killed_at = |node: &str| -> f64 {
+        script_out
+            .lines()
+            .find_map(|l| {
+                l.strip_prefix(&format!("killed {node} pid "))
+                    .and_then(|r| r.split(" at ").nth(1))
+                    .and_then(|t| t.trim().parse().ok())
+            })
+            .unwrap_or_else(|| panic!("no kill time for {node}: {context}"))
+    };
+    let gm_killed_at = killed_at("game_manager");
+    let recovered = states
+        .iter()
+        .find(|m| {
+            m.message
+                .status
+                .starts_with("recovered after a game manager restart")
+        })
+        .unwrap_or_else(|| panic!("no recovered GameState: {context}"));
+    let interrupted = recovered.message.sequence_index;
+    let results_before_kill = reader
+        .messages::<SequenceResult>(SEQUENCE_RESULT.name)
+        .expect("results")
+        .iter()
+        .filter(|m| m.message.header.stamp.as_secs_f64() < gm_killed_at)
+        .count();
+    assert_eq!(
+        usize::from(interrupted),
+        results_before_kill + 1,
+        "{context}"
+    );
+    let tasks: Vec<(u8, u32)> = reader
         .messages::<TabletTask>(TABLET_TASK.name)
         .expect("tasks")
         .iter()
-        .map(|m| m.message.sequence_index)
+        .map(|m| (m.message.sequence_index, m.message.sequence_id))
         .collect();
-    assert_eq!(tasks, (1..=10).collect::<Vec<u8>>(), "each task sent once");
+    // Each task once, task ids never reused. If the kill came after the interrupted
+    // sequence's task went out, that sequence is played again from its start after the resume,
+    // with a new task id: its index (only its) may appear twice.
+    let mut indices: Vec<u8> = tasks.iter().map(|t| t.0).collect();
+    let mut ids: Vec<u32> = tasks.iter().map(|t| t.1).collect();
+    indices.dedup_by(|a, b| a == b && *a == interrupted);
+    ids.dedup();
+    assert_eq!(indices, (1..=10).collect::<Vec<u8>>(), "tasks: {tasks:?}");
+    assert_eq!(ids.len(), tasks.len(), "a task id sent twice: {tasks:?}");
 
     // Privacy: the bag holds the suite's features and events, never an image or a sound.
     let types: std::collections::BTreeSet<String> = reader
@@ -329,9 +423,6 @@ echo "launch_exit=$?"
     eprintln!("bag channel types: {types:?}");
 
     // Each kill: seen within the timeout, the robot silent while held, then resumed.
-    let states = reader
-        .messages::<GameState>(GAME_STATE.name)
-        .expect("game states");
     let robot: Vec<(u64, String)> = [ROBOT_SPEECH.name, ROBOT_EMOTION.name, ROBOT_GESTURE.name]
         .iter()
         .flat_map(|t| reader.messages::<StringMsg>(t).expect("robot topic"))
@@ -344,15 +435,11 @@ echo "launch_exit=$?"
         console.contains("node lost: bag_recorder") && console.contains("bag_recorder is back"),
         "{context}"
     );
-    for (node, _) in kills.iter().filter(|(n, _)| *n != "bag_recorder") {
-        let killed_at: f64 = script_out
-            .lines()
-            .find_map(|l| {
-                l.strip_prefix(&format!("killed {node} pid "))
-                    .and_then(|r| r.split(" at ").nth(1))
-                    .and_then(|t| t.trim().parse().ok())
-            })
-            .unwrap_or_else(|| panic!("no kill time for {node}: {context}"));
+    for (node, _) in kills
+        .iter()
+        .filter(|(n, _)| !["bag_recorder", "game_manager"].contains(n))
+    {
+        let killed_at = killed_at(node);
         let lost = states
             .iter()
             .find(|m| m.message.status.starts_with(&format!("node lost: {node}")))
@@ -388,6 +475,85 @@ echo "launch_exit=$?"
         );
     }
 
+    // The game manager's own kill: shown lost by the tablet bridge within the timeout; the
+    // respawn took the session over paused, the robot silent until the therapist's resume;
+    // no command carried out twice, no sequence decided more than once but the interrupted one.
+    let killed_at = gm_killed_at;
+    let bridge_lost_s = script_out
+        .lines()
+        .find_map(|l| l.strip_prefix("bridge showed game_manager lost at "))
+        .and_then(|t| t.trim().parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("the bridge did not show the game manager lost: {context}"))
+        - killed_at;
+    assert!(
+        bridge_lost_s > LOSS_TIMEOUT_S - 0.3 && bridge_lost_s <= LOSS_TIMEOUT_S + 1.0,
+        "the bridge showed the game manager lost {bridge_lost_s:.3} s after the kill"
+    );
+    let stderr = read("stderr.log");
+    assert!(
+        stderr.contains("game manager back (pid"),
+        "the bridge did not show the game manager back: {context}"
+    );
+    assert_eq!(
+        (
+            recovered.message.phase,
+            recovered.message.session_id.as_str()
+        ),
+        (GameState::PAUSED, session_id.as_str())
+    );
+    let commands = reader
+        .messages::<TherapistCommand>(THERAPIST_COMMAND.name)
+        .expect("commands");
+    let resume = commands
+        .iter()
+        .find(|m| m.message.command == TherapistCommand::RESUME)
+        .unwrap_or_else(|| panic!("no resume in the bag: {context}"));
+    let tag = format!("(command {})", resume.message.command_id);
+    let carried_out: Vec<&bag::Stamped<GameState>> = states
+        .iter()
+        .filter(|m| m.message.status.contains(&tag) && !m.message.status.starts_with("rejected"))
+        .collect();
+    assert_eq!(carried_out.len(), 1, "resume carried out once: {context}");
+    let starts = states
+        .iter()
+        .filter(|m| m.message.status.starts_with("session started"))
+        .count();
+    assert_eq!(starts, 1, "one start");
+    let acted: Vec<&(u64, String)> = robot
+        .iter()
+        .filter(|(t, d)| {
+            *t as f64 * 1e-9 > killed_at && *t < carried_out[0].log_time && !d.is_empty()
+        })
+        .collect();
+    assert!(
+        acted.is_empty(),
+        "the robot acted before the resume: {acted:?}"
+    );
+    let mut decided = [0u32; 11];
+    for d in reader
+        .messages::<Decision>(DECISION.name)
+        .expect("decisions")
+    {
+        if let Some(n) = decided.get_mut(usize::from(d.message.step)) {
+            *n += 1;
+        }
+    }
+    assert!(
+        decided.iter().enumerate().all(|(step, n)| *n
+            <= if step == usize::from(interrupted) {
+                2
+            } else {
+                1
+            }),
+        "decisions per step: {decided:?}"
+    );
+    eprintln!(
+        "game_manager: SIGKILL -> bridge showed it lost {bridge_lost_s:.3} s; recovered at \
+         sequence {interrupted}, resumed {:.1} s after the kill; decisions per step {:?}",
+        carried_out[0].log_time as f64 * 1e-9 - killed_at,
+        &decided[1..]
+    );
+
     // The policy's Q-table: the respawned policy went on from the file its predecessor saved.
     let updates = |p: &Path| -> u64 {
         let v: serde_json::Value =
@@ -402,6 +568,16 @@ echo "launch_exit=$?"
     assert!(
         (1..10).contains(&before) && after == 10,
         "Q-table updates: {before} before the kill, {after} of 10 at the end"
+    );
+    // A respawn that ignored the file would also end at 10 (relearning 1..10 from the re-sent
+    // results); only one that loaded it knows it has learned from sequence 1 already.
+    let respawned_policy = stderr
+        .split("restarted behaviour_policy (pid")
+        .nth(1)
+        .expect("the launcher restarted the policy");
+    assert!(
+        respawned_policy.contains("already learned from this sequence"),
+        "the respawned policy did not skip a result its file had learned: {context}"
     );
     eprintln!(
         "Q-table updates: {before} before the policy's SIGKILL, {after} of 10 at the end; \

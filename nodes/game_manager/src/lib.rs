@@ -2,12 +2,14 @@
 //! ([`GameManager`]) is a sans-IO state machine: therapist commands, tablet answers,
 //! engagement, policy answers and timer firings in; robot speech, faces and gestures, tablet
 //! tasks, game states, sequence results, policy requests, timer requests, session-file
-//! records and log lines out. `src/main.rs` connects it to DDS.
+//! records and log lines out; a session a killed node left unfinished is taken over from its
+//! files ([`recovery`]). `src/main.rs` connects it to DDS.
 
 pub mod game;
 pub mod live_line;
 pub mod params;
 pub mod protocol;
+pub mod recovery;
 pub mod scoring;
 pub mod sequence;
 pub mod session_file;

@@ -1,11 +1,13 @@
 //! `game_manager run`: the game manager node. Moves messages between DDS and the sans-IO core
 //! (`GameManager`): therapist commands, tablet answers, engagement and heartbeats in; robot speech, faces,
 //! gestures, tablet tasks, game states and results out; DecideAction calls with a deadline;
-//! the core's timers; session files; one live line per sequence on stdout.
+//! the core's timers; session files; one live line per sequence on stdout. At start-up, a
+//! session a killed predecessor left unfinished in the sessions directory is taken over.
 //!   game_manager run [--sessions-dir DIR] [--params-file params/game_manager.yaml]
 
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
+use game_manager::recovery::{self, RecoveredSession};
 use game_manager::session_file::SessionFiles;
 use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
 use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
@@ -107,7 +109,16 @@ async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result
     tracing::info!(sessions_dir = %params.sessions_dir, language = %params.language,
         time_scale = params.time_scale, "game manager ready");
 
-    let initial = core.initial_outputs(now_nanos());
+    let now = now_nanos();
+    let initial = match recovered_session(&mut core, &files, &params, now) {
+        Some(r) => {
+            tracing::warn!(session = %r.session_id, stem = %r.stem, sequences = r.records.len(),
+                "taking over a session left unfinished");
+            files.adopt(&r.session_id, &r.stem);
+            core.recover(r, now)
+        }
+        None => core.initial_outputs(now),
+    };
     let mut ctx = Dispatch {
         out: &out,
         files: &mut files,
@@ -154,6 +165,41 @@ async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result
         ctx.apply(outputs);
     }
     Ok(())
+}
+
+/// Reads the sessions directory: every session id found there is used (a START with it is
+/// refused); the newest unfinished session, if recent enough, is returned to be taken over.
+/// Whatever cannot be read or recovered is named in the log and left on disk as it is.
+fn recovered_session(
+    core: &mut GameManager,
+    files: &SessionFiles,
+    params: &GameManagerParams,
+    now: i64,
+) -> Option<RecoveredSession> {
+    let scan = files.scan();
+    for p in &scan.problems {
+        tracing::warn!("sessions directory: {p}");
+    }
+    core.remember_sessions(scan.finished_ids);
+    let mut candidates = Vec::new();
+    for u in scan.unfinished {
+        match recovery::recover_session(&u.stem, &u.records, &u.journal) {
+            Ok(r) => {
+                core.remember_sessions([r.session_id.clone()]);
+                candidates.push(r);
+            }
+            Err(why) => tracing::warn!(
+                "session files {}/{}.*: not recoverable ({why}); left as they are",
+                files.dir().display(),
+                u.stem
+            ),
+        }
+    }
+    let (chosen, left) = recovery::choose(candidates, now, params.recovery_max_age_s);
+    for l in left {
+        tracing::warn!("{l}");
+    }
+    chosen
 }
 
 /// Carries out the core's outputs, in order.
@@ -221,6 +267,13 @@ impl Dispatch<'_> {
                     Err(e) => tracing::error!(
                         "{e}; record: {}",
                         serde_json::to_string(&r).unwrap_or_default()
+                    ),
+                },
+                Output::Journal(e) => match self.files.append_journal(&e) {
+                    Ok(path) => tracing::debug!(path = %path.display(), "journal entry written"),
+                    Err(e2) => tracing::error!(
+                        "{e2}; journal entry: {}",
+                        serde_json::to_string(&e).unwrap_or_default()
                     ),
                 },
                 Output::Summary(s) => match self.files.write_summary(&s) {

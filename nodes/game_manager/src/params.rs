@@ -72,6 +72,10 @@ pub struct GameManagerParams {
     /// True: a session held for a lost node resumes by itself when every watched node is back.
     /// False: it stays paused until the therapist's resume.
     pub auto_resume_after_node_loss: bool,
+    /// At start-up, a session left unfinished in `sessions_dir` (files without a summary: the
+    /// node was killed) and active at most this many seconds ago is taken over, paused, and
+    /// goes on at the therapist's resume; older ones are left as they are. 0: never.
+    pub recovery_max_age_s: f64,
 }
 
 fn strings(v: &[&str]) -> Vec<String> {
@@ -143,6 +147,7 @@ impl Default for GameManagerParams {
             ]),
             node_loss_timeout_s: 4.0,
             auto_resume_after_node_loss: true,
+            recovery_max_age_s: 3600.0,
         }
     }
 }
@@ -251,6 +256,12 @@ impl GameManagerParams {
             }
         }
         seconds("node_loss_timeout_s", self.node_loss_timeout_s, 0.2, 600.0)?;
+        seconds(
+            "recovery_max_age_s",
+            self.recovery_max_age_s,
+            0.0,
+            30.0 * 86_400.0,
+        )?;
         for (i, name) in self.watched_nodes.iter().enumerate() {
             if name.trim().is_empty() || name == "game_manager" {
                 return bad(
@@ -346,6 +357,13 @@ mod tests {
                     ..Default::default()
                 },
                 "policy_deadline_s",
+            ),
+            (
+                GameManagerParams {
+                    recovery_max_age_s: -1.0,
+                    ..Default::default()
+                },
+                "recovery_max_age_s",
             ),
             (
                 GameManagerParams {

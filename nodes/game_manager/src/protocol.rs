@@ -3,7 +3,7 @@
 //! service requests, timer requests, session-file records and log lines out. Time is message
 //! time in nanoseconds.
 
-use crate::session_file::{SequenceRecord, SessionSummary};
+use crate::session_file::{JournalEntry, SequenceRecord, SessionSummary};
 use qt_therapy_msgs::{
     DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState, Heartbeat,
     SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
@@ -66,6 +66,9 @@ pub enum Output {
     },
     /// Append to the session file and fsync before anything after it.
     Record(Box<SequenceRecord>),
+    /// Append to the session's journal and fsync before anything after it (start, commands
+    /// carried out, tasks: what a restarted node needs to go on without repeating any).
+    Journal(Box<JournalEntry>),
     /// Write the session summary.
     Summary(Box<SessionSummary>),
     /// The per-sequence line for the operator's terminal.

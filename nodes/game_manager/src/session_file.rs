@@ -1,11 +1,14 @@
 //! The session files, so a crash loses nothing: `<session>.jsonl` gets one line per sequence,
-//! appended and fsync'd as soon as the sequence is scored; `<session>.summary.json` is written
-//! atomically (temp file + rename) when the session finishes, is stopped or emergency-stopped.
+//! appended and fsync'd as soon as the sequence is scored; `<session>.journal` gets one line
+//! per start, therapist command carried out and tablet task, fsync'd before its effect is
+//! published, so a restarted node can take the session over (`crate::recovery`);
+//! `<session>.summary.json` is written atomically (temp file + rename) when the session
+//! finishes, is stopped or emergency-stopped. Files are only ever appended to.
 
 use qt_therapy_msgs::SequenceResult;
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
-use std::io::Write as _;
+use std::io::{Read as _, Seek as _, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 
 /// One line of the session file: the published result and what explains it.
@@ -23,6 +26,77 @@ pub struct SequenceRecord {
     pub answered_ns: i64,
     /// Answers for this task that were refused (malformed, duplicated, ...).
     pub rejected_answers: u32,
+}
+
+/// A therapist command as the journal records it (start, stop and emergency stop have their
+/// own records: the start entry and the summary).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JournalCommand {
+    Pause,
+    Resume,
+    OverrideLevel,
+}
+
+/// One line of `<session>.journal`: what the session file alone cannot tell a restarted node.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "entry", rename_all = "snake_case")]
+pub enum JournalEntry {
+    /// The session started: whom it is for, and its START command's id.
+    Started {
+        session_id: String,
+        user_id: String,
+        user_model_cluster: i32,
+        command_id: u64,
+        at_ns: i64,
+    },
+    /// A therapist command was carried out (its id is never carried out again).
+    Command {
+        session_id: String,
+        command_id: u64,
+        command: JournalCommand,
+        /// An override's level and the sequence it is for.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        level: Option<u8>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        sequence_index: Option<u8>,
+        at_ns: i64,
+    },
+    /// A tablet task was sent (tablets ignore a task id they saw, so ids are never reused).
+    Task {
+        session_id: String,
+        task_id: u32,
+        sequence_index: u8,
+        at_ns: i64,
+    },
+    /// A restarted game manager took the session over.
+    Recovered {
+        session_id: String,
+        results: u8,
+        next_sequence: u8,
+        damage: Vec<String>,
+        at_ns: i64,
+    },
+}
+
+impl JournalEntry {
+    pub fn session_id(&self) -> &str {
+        match self {
+            JournalEntry::Started { session_id, .. }
+            | JournalEntry::Command { session_id, .. }
+            | JournalEntry::Task { session_id, .. }
+            | JournalEntry::Recovered { session_id, .. } => session_id,
+        }
+    }
+
+    pub fn at_ns(&self) -> i64 {
+        match self {
+            JournalEntry::Started { at_ns, .. }
+            | JournalEntry::Command { at_ns, .. }
+            | JournalEntry::Task { at_ns, .. }
+            | JournalEntry::Recovered { at_ns, .. } => *at_ns,
+        }
+    }
 }
 
 /// How a session ended.
@@ -119,12 +193,82 @@ fn sync_dir(dir: &Path) -> Result<(), SessionFileError> {
         .map_err(write_err(dir))
 }
 
+/// The session whose files are being written.
+#[derive(Debug)]
+struct OpenSession {
+    id: String,
+    stem: String,
+    records: Option<File>,
+    journal: Option<File>,
+}
+
+/// Which of a session's append-only files.
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Records,
+    Journal,
+}
+
+impl Kind {
+    fn extension(self) -> &'static str {
+        match self {
+            Kind::Records => "jsonl",
+            Kind::Journal => "journal",
+        }
+    }
+}
+
+/// Largest file a start-up scan reads: a session's files are a few kB; anything far larger is
+/// not one of ours, and is left alone rather than read into memory.
+const MAX_SCANNED_BYTES: u64 = 16 << 20;
+
+/// What a start-up finds in the sessions directory.
+#[derive(Debug, Default)]
+pub struct DirectoryScan {
+    /// Session ids of the finished sessions (their summaries).
+    pub finished_ids: Vec<String>,
+    /// Sessions with a session file or journal and no summary.
+    pub unfinished: Vec<UnfinishedFiles>,
+    /// What could not be read, and why (the files are left as they are).
+    pub problems: Vec<String>,
+}
+
+/// The text of an unfinished session's files (invalid UTF-8 replaced, so damage is named per
+/// line rather than failing the file); empty for a file that is not there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnfinishedFiles {
+    pub stem: String,
+    pub records: String,
+    pub journal: String,
+}
+
+/// Opens `path` to append, creating it; true if it was created. A crash mid-write can leave
+/// a last line without its newline: it is ended first, so the next line is not glued to it
+/// (the torn bytes stay, a damaged line that readers name and skip).
+fn open_append(path: &Path) -> std::io::Result<(File, bool)> {
+    let existed = path.exists();
+    let mut file = OpenOptions::new()
+        .create(true)
+        .append(true)
+        .read(true)
+        .open(path)?;
+    let len = file.metadata()?.len();
+    if existed && len > 0 {
+        let mut last = [0u8; 1];
+        file.seek(SeekFrom::Start(len - 1))?;
+        file.read_exact(&mut last)?;
+        if last[0] != b'\n' {
+            file.write_all(b"\n")?;
+        }
+    }
+    Ok((file, !existed))
+}
+
 /// Writes the session files of one node, one session at a time.
 #[derive(Debug)]
 pub struct SessionFiles {
     dir: PathBuf,
-    /// The session being written, its file stem and its open JSON-lines file.
-    current: Option<(String, String, Option<File>)>,
+    current: Option<OpenSession>,
 }
 
 impl SessionFiles {
@@ -139,13 +283,23 @@ impl SessionFiles {
         &self.dir
     }
 
+    /// Goes on writing a recovered session's existing files `<stem>.*` (appending).
+    pub fn adopt(&mut self, session_id: &str, stem: &str) {
+        self.current = Some(OpenSession {
+            id: session_id.to_string(),
+            stem: stem.to_string(),
+            records: None,
+            journal: None,
+        });
+    }
+
     /// The stem of `session_id`'s files: a fresh one per session, never reusing an existing
-    /// file (a restarted node that sees a session id again writes `<id>-2.jsonl`).
+    /// file (a session id whose files exist gets `<id>-2.*`).
     fn stem(&mut self, session_id: &str) -> Result<String, SessionFileError> {
-        if let Some((id, stem, _)) = &self.current
-            && id == session_id
+        if let Some(open) = &self.current
+            && open.id == session_id
         {
-            return Ok(stem.clone());
+            return Ok(open.stem.clone());
         }
         std::fs::create_dir_all(&self.dir).map_err(|source| SessionFileError::CreateDir {
             path: self.dir.clone(),
@@ -153,8 +307,9 @@ impl SessionFiles {
         })?;
         let base = sanitized_stem(session_id);
         let taken = |stem: &str| {
-            self.dir.join(format!("{stem}.jsonl")).exists()
-                || self.dir.join(format!("{stem}.summary.json")).exists()
+            ["jsonl", "journal", "summary.json"]
+                .iter()
+                .any(|ext| self.dir.join(format!("{stem}.{ext}")).exists())
         };
         let mut stem = base.clone();
         let mut n = 2;
@@ -162,34 +317,51 @@ impl SessionFiles {
             stem = format!("{base}-{n}");
             n += 1;
         }
-        self.current = Some((session_id.to_string(), stem.clone(), None));
+        self.current = Some(OpenSession {
+            id: session_id.to_string(),
+            stem: stem.clone(),
+            records: None,
+            journal: None,
+        });
         Ok(stem)
     }
 
     /// Appends one record as one line and fsyncs it; returns the file's path.
     pub fn append(&mut self, record: &SequenceRecord) -> Result<PathBuf, SessionFileError> {
-        let stem = self.stem(&record.result.session_id)?;
-        let path = self.dir.join(format!("{stem}.jsonl"));
-        let mut line =
-            serde_json::to_string(record).map_err(|source| SessionFileError::Encode {
-                path: path.clone(),
-                source,
-            })?;
+        self.append_line(&record.result.session_id, Kind::Records, record)
+    }
+
+    /// Appends one journal entry as one line and fsyncs it; returns the file's path.
+    pub fn append_journal(&mut self, entry: &JournalEntry) -> Result<PathBuf, SessionFileError> {
+        self.append_line(entry.session_id(), Kind::Journal, entry)
+    }
+
+    fn append_line(
+        &mut self,
+        session_id: &str,
+        kind: Kind,
+        value: &impl Serialize,
+    ) -> Result<PathBuf, SessionFileError> {
+        let stem = self.stem(session_id)?;
+        let path = self.dir.join(format!("{stem}.{}", kind.extension()));
+        let mut line = serde_json::to_string(value).map_err(|source| SessionFileError::Encode {
+            path: path.clone(),
+            source,
+        })?;
         line.push('\n');
-        let created = !path.exists();
-        let Some((_, _, slot)) = self.current.as_mut() else {
+        let Some(open) = self.current.as_mut() else {
             return Err(SessionFileError::Write {
                 path,
                 source: std::io::Error::other("no session is open"),
             });
         };
-        let file = match slot.take() {
-            Some(f) => f,
-            None => OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(&path)
-                .map_err(write_err(&path))?,
+        let slot = match kind {
+            Kind::Records => &mut open.records,
+            Kind::Journal => &mut open.journal,
+        };
+        let (file, created) = match slot.take() {
+            Some(f) => (f, false),
+            None => open_append(&path).map_err(write_err(&path))?,
         };
         let file = slot.insert(file);
         // One write of the whole line, then fsync: a crash leaves at most a torn last line.
@@ -215,6 +387,77 @@ impl SessionFiles {
         self.current = None;
         Ok(path)
     }
+
+    /// Reads what a restarted node needs from the directory: the finished sessions' ids and
+    /// the files of every session without a summary. Never fails: a directory that is not
+    /// there yet holds nothing, and what cannot be read is named in `problems`.
+    pub fn scan(&self) -> DirectoryScan {
+        let mut scan = DirectoryScan::default();
+        let entries = match std::fs::read_dir(&self.dir) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return scan,
+            Err(e) => {
+                scan.problems
+                    .push(format!("reading {}: {e}", self.dir.display()));
+                return scan;
+            }
+        };
+        let mut stems = std::collections::BTreeSet::new();
+        for entry in entries.filter_map(Result::ok) {
+            let name = entry.file_name().to_string_lossy().to_string();
+            if name.ends_with(".summary.json") {
+                let path = entry.path();
+                match read_capped(&path).map(|t| serde_json::from_str::<SessionSummary>(&t)) {
+                    Ok(Ok(summary)) => scan.finished_ids.push(summary.session_id),
+                    Ok(Err(e)) => scan.problems.push(format!("{}: {e}", path.display())),
+                    Err(e) => scan.problems.push(e),
+                }
+                continue;
+            }
+            let stem = name
+                .strip_suffix(".jsonl")
+                .or_else(|| name.strip_suffix(".journal"));
+            if let Some(stem) = stem
+                && !self.dir.join(format!("{stem}.summary.json")).exists()
+            {
+                stems.insert(stem.to_string());
+            }
+        }
+        for stem in stems {
+            let mut texts = [String::new(), String::new()];
+            for (text, kind) in texts.iter_mut().zip([Kind::Records, Kind::Journal]) {
+                let path = self.dir.join(format!("{stem}.{}", kind.extension()));
+                if path.exists() {
+                    match read_capped(&path) {
+                        Ok(t) => *text = t,
+                        Err(e) => scan.problems.push(e),
+                    }
+                }
+            }
+            let [records, journal] = texts;
+            scan.unfinished.push(UnfinishedFiles {
+                stem,
+                records,
+                journal,
+            });
+        }
+        scan
+    }
+}
+
+/// A file's text, invalid UTF-8 replaced; refused when larger than a session file can be.
+fn read_capped(path: &Path) -> Result<String, String> {
+    let name = path.display();
+    let len = std::fs::metadata(path)
+        .map_err(|e| format!("{name}: {e}"))?
+        .len();
+    if len > MAX_SCANNED_BYTES {
+        return Err(format!(
+            "{name}: {len} bytes is too large for a session file; left as it is"
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
+    Ok(String::from_utf8_lossy(&bytes).into_owned())
 }
 
 /// The records of a session file. A torn last line (a crash mid-write) is reported in

@@ -143,22 +143,25 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
 }
 
 #[test]
-fn a_killed_node_loses_no_scored_sequence_and_a_stopped_one_writes_its_summary() {
+fn a_killed_node_loses_no_scored_sequence_and_its_restart_goes_on_with_the_same_session() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     write_params(d);
-    // The peer gives up after 8 s (mid-session); the node is then killed (a crash), started
-    // again, and stopped by SIGINT in the middle of a second session of the same id.
+    // The peer gives up after 8 s (mid-session, an override carried out); the node is then
+    // killed (a crash) and started again: it takes the session over, paused. A second peer
+    // delivers the START and the override again, resumes (id 3, twice), plays for 8 s; then
+    // SIGINT stops the node, which saves the summary.
     let script = format!(
         r#"
         export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR={d}
         {gm} run --sessions-dir {d}/sessions >{d}/gm1.out 2>{d}/gm1.err &
         G=$!
-        {peer} --session s --timeout-s 8 >{d}/peer1.out 2>{d}/peer1.err
+        {peer} --session s --timeout-s 8 --override-level 3 >{d}/peer1.out 2>{d}/peer1.err
         kill -KILL $G; wait $G
+        cp {d}/sessions/s.jsonl {d}/crashed.jsonl
         {gm} run --sessions-dir {d}/sessions >{d}/gm2.out 2>{d}/gm2.err &
         G=$!
-        {peer} --session s --timeout-s 8 >{d}/peer2.out 2>{d}/peer2.err
+        {peer} --session s --timeout-s 8 --override-level 3 --resume-recovered 3 >{d}/peer2.out 2>{d}/peer2.err
         kill -INT $G; wait $G; RC=$?
         echo "{{\"game_manager\":$RC}}"
         "#,
@@ -171,12 +174,13 @@ fn a_killed_node_loses_no_scored_sequence_and_a_stopped_one_writes_its_summary()
     };
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
     let context = format!(
-        "script: {}\n{}\ngm1: {}\ngm2: {}\n{}",
+        "script: {}\n{}\ngm1: {}\ngm2: {}\n{}\npeer2: {}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr),
         read("gm1.out"),
         read("gm2.out"),
-        read("gm2.err")
+        read("gm2.err"),
+        read("peer2.out"),
     );
     let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
     assert_eq!(
@@ -184,33 +188,94 @@ fn a_killed_node_loses_no_scored_sequence_and_a_stopped_one_writes_its_summary()
         Some(0.into()),
         "{context}"
     );
-    let seen = |f: &str| {
+    let seen = |f: &str| -> Vec<u64> {
         json_lines(&read(f))
             .iter()
             .filter(|e| e["event"] == "result")
-            .count()
+            .filter_map(|e| e["index"].as_u64())
+            .collect()
     };
 
     // The crash: every result the peer saw is on disk (written before it was published).
-    let crashed = read_records(&d.join("sessions/s.jsonl")).expect("first session file");
-    assert!(seen("peer1.out") >= 1, "{context}");
-    assert!(crashed.records.len() >= seen("peer1.out"), "{context}");
-    assert!(
-        !d.join("sessions/s.summary.json").exists(),
-        "a crash writes no summary"
-    );
+    let crashed = read_records(&d.join("crashed.jsonl")).expect("the file at the crash");
+    let (before, after) = (seen("peer1.out"), seen("peer2.out"));
+    assert!(!before.is_empty(), "{context}");
+    assert!(crashed.records.len() >= before.len(), "{context}");
 
-    // The restart: same session id, new files; SIGINT saves the summary.
-    let second = read_records(&d.join("sessions/s-2.jsonl")).expect("second session file");
+    // The restart took the same session over, paused, and went on at the resume with the
+    // sequence after the last one on disk: one session, one set of files.
     assert!(
-        second.records.len() >= seen("peer2.out") && !second.records.is_empty(),
+        read("gm2.out").contains("recovered after a game manager restart"),
         "{context}"
     );
+    assert_eq!(
+        after.first().copied(),
+        Some(crashed.records.len() as u64 + 1),
+        "{context}"
+    );
+    let records = read_records(&d.join("sessions/s.jsonl")).expect("the session file");
+    let indices: Vec<u64> = records
+        .records
+        .iter()
+        .map(|r| u64::from(r.result.sequence_index))
+        .collect();
+    assert_eq!(
+        indices,
+        (1..=indices.len() as u64).collect::<Vec<_>>(),
+        "{context}"
+    );
+    assert!(
+        indices.len() >= crashed.records.len() + after.len(),
+        "{context}"
+    );
+    let mut files: Vec<String> = std::fs::read_dir(d.join("sessions"))
+        .expect("sessions dir")
+        .filter_map(Result::ok)
+        .map(|e| e.file_name().to_string_lossy().to_string())
+        .collect();
+    files.sort();
+    assert_eq!(
+        files,
+        ["s.journal", "s.jsonl", "s.summary.json"],
+        "{context}"
+    );
+
+    // Commands carried out before the crash, delivered again, and the resume sent twice: each
+    // refused; the resume carried out once; the override used once.
+    let gm2 = read("gm2.err");
+    for refused in [
+        r#"rejected command 1 (start) for session "s": stale command id 1 (last accepted 2)"#,
+        r#"rejected command 2 (override level) for session "s": duplicate command id 2"#,
+        r#"rejected command 3 (resume) for session "s": duplicate command id 3"#,
+    ] {
+        assert_eq!(gm2.matches(refused).count(), 1, "{refused}\n{context}");
+    }
+    assert_eq!(
+        gm2.matches(r#"accepted command 3 (resume) for session "s""#)
+            .count(),
+        1,
+        "{context}"
+    );
+    assert_eq!(
+        records
+            .records
+            .iter()
+            .filter(|r| r.result.overridden)
+            .count(),
+        1,
+        "{context}"
+    );
+    let journal = read("sessions/s.journal");
+    assert_eq!(journal.matches(r#""entry":"recovered""#).count(), 1);
+    assert_eq!(journal.matches(r#""command_id":3"#).count(), 1);
+
+    // SIGINT saves the summary of the whole session.
     let summary: SessionSummary =
-        serde_json::from_str(&read("sessions/s-2.summary.json")).expect("summary of the second");
+        serde_json::from_str(&read("sessions/s.summary.json")).expect("summary");
     assert_eq!(
         summary.end,
         game_manager::session_file::SessionEnd::NodeShutdown
     );
-    assert_eq!(usize::from(summary.sequences_played), second.records.len());
+    assert_eq!(usize::from(summary.sequences_played), records.records.len());
+    assert_eq!(summary.overrides, 1);
 }

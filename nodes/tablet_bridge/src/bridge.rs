@@ -5,12 +5,13 @@
 use crate::limits::TokenBucket;
 use crate::params::TabletBridgeParams;
 use crate::protocol::{
-    ClientMessage, CommandKind, DecisionView, EngagementPoint, GameView, ResultView, Role,
-    ServerMessage, TaskView, parse_client_message,
+    ClientMessage, CommandKind, DecisionView, EngagementPoint, ResultView, Role, ServerMessage,
+    TaskView, parse_client_message,
 };
 use crate::therapist::CommandIds;
+use crate::watch::GameManagerWatch;
 use qt_therapy_msgs::{
-    Decision, ExpectedEngagement, GameState, SequenceResult, TabletAnswer, TabletTask,
+    Decision, ExpectedEngagement, GameState, Heartbeat, SequenceResult, TabletAnswer, TabletTask,
     TherapistCommand,
 };
 use std::collections::{BTreeMap, VecDeque};
@@ -46,6 +47,8 @@ pub enum DdsInput {
     Decision(Decision),
     Engagement(ExpectedEngagement),
     Result(SequenceResult),
+    /// Any node's heartbeat; the game manager's are watched.
+    Heartbeat(Heartbeat),
 }
 
 /// At most one "too many messages" notice per connection per this long.
@@ -84,6 +87,7 @@ pub struct Bridge {
     /// Wrong PINs left over all connections; refilled over a minute.
     pub(crate) pin_budget: TokenBucket,
     pub(crate) last_emergency_stop: Option<(String, Duration)>,
+    pub(crate) gm_watch: GameManagerWatch,
 }
 
 impl Bridge {
@@ -104,6 +108,7 @@ impl Bridge {
             current_session: None,
             command_ids: CommandIds::default(),
             last_emergency_stop: None,
+            gm_watch: GameManagerWatch::default(),
         }
     }
 
@@ -135,11 +140,8 @@ impl Bridge {
         let mut out = Vec::new();
         match role {
             Role::Child => {
-                if let Some(g) = &self.game {
-                    out.push(Output::Send(
-                        id,
-                        ServerMessage::Game(GameView::for_child(g)),
-                    ));
+                if let Some(v) = self.child_view() {
+                    out.push(Output::Send(id, ServerMessage::Game(v)));
                 }
                 out.push(Output::Send(id, self.child_task_message()));
             }
@@ -306,8 +308,8 @@ impl Bridge {
     /// Everything a therapist page shows, for one that just logged in.
     pub(crate) fn therapist_snapshot(&self, id: ClientId, out: &mut Vec<Output>) {
         out.push(Output::Send(id, ServerMessage::LoggedIn));
-        if let Some(g) = &self.game {
-            out.push(Output::Send(id, ServerMessage::Game(GameView::of(g))));
+        if let Some(v) = self.therapist_view() {
+            out.push(Output::Send(id, ServerMessage::Game(v)));
         }
         let points = self.engagement.iter().cloned().collect();
         out.push(Output::Send(

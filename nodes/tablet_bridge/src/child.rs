@@ -76,6 +76,9 @@ impl Bridge {
         if open.answered {
             return Err(format!("sequence {sequence_id} was already answered"));
         }
+        if self.gm_watch.lost() {
+            return Err("the game manager is lost: the answer could not be scored".into());
+        }
         if let Some(g) = &self.game
             && g.phase == GameState::PAUSED
             && g.session_id == task.session_id

@@ -4,7 +4,7 @@
 
 use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output};
 use crate::protocol::{
-    DecisionView, EngagementPoint, GameView, ResultView, Role, ServerMessage, TaskView, phase_name,
+    DecisionView, EngagementPoint, ResultView, Role, ServerMessage, TaskView, phase_name,
 };
 use qt_therapy_msgs::{GameState, TabletTask};
 use std::collections::VecDeque;
@@ -29,6 +29,7 @@ impl Bridge {
                 push_for_session(&mut self.results, view.clone(), |v| &v.session_id);
                 self.broadcast(Role::Therapist, &ServerMessage::Result(view), &mut out);
             }
+            DdsInput::Heartbeat(hb) => self.heartbeat(&hb, now, &mut out),
             DdsInput::Engagement(e) => {
                 let point = EngagementPoint::of(&e);
                 if self.engagement.len() >= self.params.engagement_history {
@@ -56,18 +57,18 @@ impl Bridge {
             .task
             .as_ref()
             .is_some_and(|t| t.task.session_id != g.session_id);
-        self.broadcast(Role::Therapist, &ServerMessage::Game(GameView::of(&g)), out);
-        self.broadcast(
-            Role::Child,
-            &ServerMessage::Game(GameView::for_child(&g)),
-            out,
-        );
+        let phase = g.phase;
+        self.game = Some(g);
+        // The game manager's own state after it came back says what it does now.
+        if !self.gm_watch.lost() {
+            self.gm_watch.notice = None;
+        }
+        self.show_game(out);
         if self.task.is_some() && (ended || other_session) {
             self.task = None;
-            let reason = format!("the game is {}", phase_name(g.phase));
+            let reason = format!("the game is {}", phase_name(phase));
             self.broadcast(Role::Child, &ServerMessage::NoTask { reason }, out);
         }
-        self.game = Some(g);
     }
 
     fn new_task(&mut self, t: TabletTask, now: Now, out: &mut Vec<Output>) {

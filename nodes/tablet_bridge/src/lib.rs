@@ -12,6 +12,7 @@ pub mod params;
 pub mod protocol;
 pub mod server;
 pub mod therapist;
+pub mod watch;
 
 pub use bridge::{Bridge, ClientId, DdsInput, Now, Output};
 pub use params::TabletBridgeParams;

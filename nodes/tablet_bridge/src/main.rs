@@ -7,8 +7,8 @@ use anyhow::Context as _;
 use clap::Parser;
 use node_shell::{NodeShell, ShellOptions};
 use qt_therapy_msgs::topics::{
-    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK,
-    THERAPIST_COMMAND,
+    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_ANSWER,
+    TABLET_TASK, THERAPIST_COMMAND,
 };
 use tablet_bridge::server::{Publish, serve};
 use tablet_bridge::{DdsInput, TabletBridgeParams};
@@ -73,9 +73,11 @@ async fn main() -> anyhow::Result<()> {
         );
         forward(
             shell.subscribe(EXPECTED_ENGAGEMENT, 64)?,
-            dds_tx,
+            dds_tx.clone(),
             DdsInput::Engagement,
         );
+        // Every node's heartbeat; the core watches the game manager's.
+        forward(shell.subscribe(HEARTBEAT, 64)?, dds_tx, DdsInput::Heartbeat);
         let (publish_tx, mut publish_rx) = mpsc::channel(256);
         let server = tokio::spawn(serve(params, dds_rx, publish_tx, shell.shutdown_signal()));
         // The server holds the only sender: this loop ends when the server does.

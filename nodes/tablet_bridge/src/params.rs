@@ -28,6 +28,8 @@ pub struct TabletBridgeParams {
     pub pin_max_failures: u32,
     /// Expected-engagement points kept for the therapist's trend chart.
     pub engagement_history: usize,
+    /// Seconds without a heartbeat from the game manager after which the pages show it lost.
+    pub game_manager_loss_timeout_s: f64,
 }
 
 impl Default for TabletBridgeParams {
@@ -43,6 +45,7 @@ impl Default for TabletBridgeParams {
             max_clients: 16,
             pin_max_failures: 5,
             engagement_history: 300,
+            game_manager_loss_timeout_s: 4.0,
         }
     }
 }
@@ -105,6 +108,13 @@ impl TabletBridgeParams {
                 return bad(key, "must be at least 1".into());
             }
         }
+        let t = self.game_manager_loss_timeout_s;
+        if !(t.is_finite() && (0.2..=600.0).contains(&t)) {
+            return bad(
+                "game_manager_loss_timeout_s",
+                format!("{t} is not a number of seconds in [0.2, 600]"),
+            );
+        }
         if self.ws_max_message_bytes > 1 << 20 {
             return bad("ws_max_message_bytes", "must be at most 1 MiB".into());
         }
@@ -120,7 +130,14 @@ mod tests {
     fn defaults_are_valid_and_bad_values_name_their_key() {
         let p = TabletBridgeParams::default();
         assert_eq!(p.validate().map(|a| a.port()), Ok(8080));
-        let cases: [(&str, TabletBridgeParams); 5] = [
+        let cases: [(&str, TabletBridgeParams); 6] = [
+            (
+                "game_manager_loss_timeout_s",
+                TabletBridgeParams {
+                    game_manager_loss_timeout_s: 0.0,
+                    ..p.clone()
+                },
+            ),
             (
                 "http_bind",
                 TabletBridgeParams {

@@ -287,8 +287,12 @@ async fn run_core(
 ) {
     let mut pages: HashMap<ClientId, mpsc::Sender<Outgoing>> = HashMap::new();
     loop {
+        // The core's next deadline (the game manager's heartbeat timeout), on its clock.
+        let deadline = core.next_deadline();
+        let due = tokio::time::Instant::from_std(clock + deadline.unwrap_or_default());
         let outputs = tokio::select! {
             _ = stop.wait_for(|stop| *stop) => break,
+            _ = tokio::time::sleep_until(due), if deadline.is_some() => core.tick(now(clock)),
             Some(event) = events.recv() => match event {
                 Event::Connect { role, out, reply } => match core.connect(role, now(clock)) {
                     Ok((id, outputs)) => {

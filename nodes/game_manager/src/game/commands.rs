@@ -5,9 +5,9 @@
 //! the unsafe choice.
 
 use super::{Current, GameManager, Phase, Session, Timer};
-use crate::protocol::LogLevel;
+use crate::protocol::{LogLevel, Output};
 use crate::sequence::SessionRng;
-use crate::session_file::SessionEnd;
+use crate::session_file::{JournalCommand, JournalEntry, SessionEnd};
 use qt_therapy_msgs::TherapistCommand;
 use sequence_game::{Level, State};
 
@@ -65,8 +65,14 @@ impl GameManager {
         }
         self.log(LogLevel::Info, format!("accepted {what}"));
         match c.command {
-            TherapistCommand::PAUSE => self.pause(c.command_id, now),
-            TherapistCommand::RESUME => self.resume(c.command_id, now),
+            TherapistCommand::PAUSE => {
+                self.journal_command(c.command_id, JournalCommand::Pause, None, now);
+                self.pause(c.command_id, now)
+            }
+            TherapistCommand::RESUME => {
+                self.journal_command(c.command_id, JournalCommand::Resume, None, now);
+                self.resume(c.command_id, now)
+            }
             TherapistCommand::STOP => self.end_session(
                 SessionEnd::Stopped,
                 &format!("stopped by the therapist (command {})", c.command_id),
@@ -175,8 +181,39 @@ impl GameManager {
         }
     }
 
+    /// Journals a command carried out (before its effect is published), so a restarted node
+    /// never carries out its id again.
+    fn journal_command(
+        &mut self,
+        command_id: u64,
+        command: JournalCommand,
+        over: Option<(u8, Level)>,
+        now: i64,
+    ) {
+        let Some(s) = self.session.as_ref() else {
+            return;
+        };
+        self.out
+            .push(Output::Journal(Box::new(JournalEntry::Command {
+                session_id: s.id.clone(),
+                command_id,
+                command,
+                level: over.map(|(_, l)| l.get()),
+                sequence_index: over.map(|(i, _)| i),
+                at_ns: now,
+            })));
+    }
+
     fn start_session(&mut self, c: &TherapistCommand, now: i64) {
         self.used_sessions.insert(c.session_id.clone());
+        self.out
+            .push(Output::Journal(Box::new(JournalEntry::Started {
+                session_id: c.session_id.clone(),
+                user_id: c.user_id.clone(),
+                user_model_cluster: c.user_model_cluster,
+                command_id: c.command_id,
+                at_ns: now,
+            })));
         self.engagement.clear();
         self.timers.clear();
         self.current = Current::default();
@@ -208,7 +245,7 @@ impl GameManager {
                 c.session_id, c.user_id, c.user_model_cluster, c.command_id
             ),
         );
-        self.out.push(crate::protocol::Output::LiveLine(format!(
+        self.out.push(Output::LiveLine(format!(
             "session {:?} started for user {:?} (cluster {})",
             c.session_id, c.user_id, c.user_model_cluster
         )));
@@ -299,6 +336,14 @@ impl GameManager {
             _ => {
                 self.status = why.to_string();
                 self.publish_state(now);
+                // A recovered session has neither an action nor a request for its next
+                // sequence: ask now rather than at recovery, when the policy may not be up.
+                if self.phase == Phase::Deciding
+                    && self.current.plan.is_none()
+                    && self.current.request_id.is_none()
+                {
+                    self.request_decision(now);
+                }
                 self.maybe_present(now);
             }
         }
@@ -309,6 +354,12 @@ impl GameManager {
             return;
         };
         let target = self.override_target();
+        self.journal_command(
+            command_id,
+            JournalCommand::OverrideLevel,
+            Some((target, level)),
+            now,
+        );
         if let Some(s) = self.session.as_mut() {
             s.pending_override = Some((target, level));
         }

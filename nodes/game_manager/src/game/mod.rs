@@ -2,15 +2,19 @@
 //! One session at a time: decide (policy, override or fallback) -> feedback -> say the
 //! sequence -> tablet task -> answer or timeout -> score with engagement -> next, x omega.
 //! The therapist can start, pause, resume, stop, override the next level or emergency-stop.
-//! A watched node that stops its heartbeat holds the session, with the robot silent.
+//! A watched node that stops its heartbeat holds the session, with the robot silent. A
+//! session a killed node left unfinished is taken over, paused (`recover`).
 
 mod commands;
 mod decide;
 mod outcome;
 mod present;
+mod recover;
 #[cfg(test)]
 mod tests;
 mod watch;
+
+pub use recover::RECOVERED_STATUS;
 
 use crate::params::{GameManagerParams, ParamError};
 use crate::protocol::{Input, LogLevel, Output};

@@ -3,6 +3,7 @@
 
 use super::{GameManager, Phase, Timer};
 use crate::protocol::{LogLevel, Output};
+use crate::session_file::JournalEntry;
 use qt_therapy_msgs::TabletTask;
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
@@ -97,6 +98,14 @@ impl GameManager {
         s.next_sequence_id += 1;
         let (session_id, index) = (s.id.clone(), s.index);
         let timeout = self.scaled_ns(self.params.answer_timeout_s);
+        // Journalled first: a restarted node must not send this id again (tablets ignore a
+        // task id they already saw).
+        self.out.push(Output::Journal(Box::new(JournalEntry::Task {
+            session_id: session_id.clone(),
+            task_id: sequence_id,
+            sequence_index: index,
+            at_ns: now,
+        })));
         self.current.sequence_id = sequence_id;
         self.current.task_sent_ns = now;
         self.current.answer_deadline_ns = now + timeout;

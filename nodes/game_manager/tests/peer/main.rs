@@ -1,8 +1,10 @@
 //! TEST TOOL ONLY, for `tests/dds_session.rs`: a scripted DDS peer of the game manager. In one
 //! process it plays a rule-based policy (DecideAction), the child tablet (answers each task
 //! with the emotions the robot showed, or a wrong one, or nothing), a camera (one
-//! ExpectedEngagement per second) and the therapist (start, a duplicated start, an override).
-//! It prints one JSON line per event. The real nodes live in their own crates.
+//! ExpectedEngagement per second) and the therapist (start, a duplicated start, an override;
+//! or, for a game manager that took over a session after a crash, the commands it had already
+//! carried out delivered again and a resume). It prints one JSON line per event. The real
+//! nodes live in their own crates.
 
 use clap::Parser;
 use node_shell::{NoParameters, NodeShell, ShellOptions, header_now, now_nanos};
@@ -28,6 +30,10 @@ struct Cli {
     answer_delay_ms: u64,
     #[arg(long, default_value_t = 150)]
     timeout_s: u64,
+    /// Do not start: wait for the game manager's recovered session, deliver its START (id 1)
+    /// and override (id 2) again, then resume it with this id, twice.
+    #[arg(long)]
+    resume_recovered: Option<u64>,
     #[command(flatten)]
     shell: ShellOptions,
 }
@@ -138,9 +144,38 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
     }
     // Give the game manager's DecideAction client time to match this server.
     tokio::time::sleep(Duration::from_secs(1)).await;
-    commands.send(command(TherapistCommand::START, &cli.session, 1));
-    commands.send(command(TherapistCommand::START, &cli.session, 1));
-    emit(serde_json::json!({"event": "started"}));
+    if let Some(resume_id) = cli.resume_recovered {
+        let Ok(Some(first)) = first else {
+            return Ok(2);
+        };
+        emit(serde_json::json!({"event": "state", "phase": first.phase,
+            "index": first.sequence_index, "status": first.status}));
+        if first.phase != GameState::PAUSED
+            || !first
+                .status
+                .starts_with(game_manager::game::RECOVERED_STATUS)
+        {
+            emit(serde_json::json!({"event": "error", "what": "no recovered session"}));
+            return Ok(2);
+        }
+        // What was carried out before the crash, delivered again, then the therapist's resume
+        // (sent twice, as a console resends an unconfirmed command).
+        let mut again = command(TherapistCommand::OVERRIDE_LEVEL, &cli.session, 2);
+        again.level = cli.override_level.unwrap_or(3);
+        for c in [
+            command(TherapistCommand::START, &cli.session, 1),
+            again,
+            command(TherapistCommand::RESUME, &cli.session, resume_id),
+            command(TherapistCommand::RESUME, &cli.session, resume_id),
+        ] {
+            commands.send(c);
+        }
+        emit(serde_json::json!({"event": "resumed"}));
+    } else {
+        commands.send(command(TherapistCommand::START, &cli.session, 1));
+        commands.send(command(TherapistCommand::START, &cli.session, 1));
+        emit(serde_json::json!({"event": "started"}));
+    }
 
     let (answer_tx, mut due_answers) = tokio::sync::mpsc::channel::<TabletAnswer>(16);
     let mut shown: Vec<String> = Vec::new();
@@ -178,6 +213,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                 emit(serde_json::json!({"event": "state", "phase": s.phase, "index": s.sequence_index,
                     "status": s.status, "fallback": s.policy_fallback}));
                 if let Some(level) = cli.override_level
+                    && cli.resume_recovered.is_none()
                     && !overridden && s.sequence_index == 1 && s.phase == GameState::WAITING_FOR_ANSWER
                 {
                     let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &cli.session, 2);

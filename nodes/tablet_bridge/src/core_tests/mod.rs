@@ -10,6 +10,7 @@ use serde_json::json;
 mod child;
 mod game;
 mod therapist;
+mod watch;
 
 const PIN: &str = "2468";
 const WALL0: i64 = 1_700_000_000_000_000_000;

@@ -8,16 +8,6 @@ use crate::protocol::{Input, Output};
 use crate::session_file::SessionEnd;
 use qt_therapy_msgs::{GameState, TherapistCommand as C};
 
-fn cmd(code: u8, session: &str, id: u64) -> Input {
-    Input::Command(command(code, session, id))
-}
-
-fn override_to(level: u8, session: &str, id: u64) -> Input {
-    let mut c = command(C::OVERRIDE_LEVEL, session, id);
-    c.level = level;
-    Input::Command(c)
-}
-
 fn harness() -> Harness {
     Harness::new(
         GameManagerParams::default(),

@@ -5,7 +5,8 @@
 use crate::game::GameManager;
 use crate::params::GameManagerParams;
 use crate::protocol::{Input, Output};
-use crate::session_file::{SequenceRecord, SessionSummary};
+use crate::recovery::RecoveredSession;
+use crate::session_file::{JournalEntry, SequenceRecord, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{
@@ -126,13 +127,48 @@ pub fn command(code: u8, session: &str, id: u64) -> TherapistCommand {
     }
 }
 
+/// A therapist command as the core's input.
+pub fn cmd(code: u8, session: &str, id: u64) -> Input {
+    Input::Command(command(code, session, id))
+}
+
+/// The therapist's override of the next sequence's level.
+pub fn override_to(level: u8, session: &str, id: u64) -> Input {
+    let mut c = command(TherapistCommand::OVERRIDE_LEVEL, session, id);
+    c.level = level;
+    Input::Command(c)
+}
+
 impl Harness {
     pub fn new(params: GameManagerParams, policy: Policy, child: Child) -> Self {
         let mut gm = GameManager::new(params).expect("valid parameters");
         let initial = gm.initial_outputs(T0);
+        Self::around(gm, T0, initial, policy, child)
+    }
+
+    /// A core started at `now` that takes over the unfinished session `r`.
+    pub fn recovering(
+        params: GameManagerParams,
+        policy: Policy,
+        child: Child,
+        r: RecoveredSession,
+        now: i64,
+    ) -> Self {
+        let mut gm = GameManager::new(params).expect("valid parameters");
+        let initial = gm.recover(r, now);
+        Self::around(gm, now, initial, policy, child)
+    }
+
+    fn around(
+        gm: GameManager,
+        now: i64,
+        initial: Vec<Output>,
+        policy: Policy,
+        child: Child,
+    ) -> Self {
         let mut h = Harness {
             gm,
-            now: T0,
+            now,
             queue: BTreeMap::new(),
             seq: 0,
             log: Vec::new(),
@@ -332,6 +368,31 @@ impl Harness {
                 _ => None,
             })
             .collect()
+    }
+
+    pub fn journal(&self) -> Vec<JournalEntry> {
+        self.outputs()
+            .filter_map(|o| match o {
+                Output::Journal(e) => Some((**e).clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The session file and journal as `SessionFiles` writes them: one JSON line each.
+    pub fn file_texts(&self) -> (String, String) {
+        let lines = |v: Vec<String>| v.into_iter().map(|l| l + "\n").collect::<String>();
+        let records = self
+            .records()
+            .iter()
+            .map(|r| serde_json::to_string(r).expect("json"))
+            .collect();
+        let journal = self
+            .journal()
+            .iter()
+            .map(|e| serde_json::to_string(e).expect("json"))
+            .collect();
+        (lines(records), lines(journal))
     }
 
     pub fn summaries(&self) -> Vec<SessionSummary> {

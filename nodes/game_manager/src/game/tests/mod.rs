@@ -4,4 +4,5 @@ mod answers;
 mod commands;
 mod harness;
 mod heartbeats;
+mod recovery;
 mod session;

@@ -1,0 +1,168 @@
+//! Going on with a session a killed game manager left unfinished (its files read back by
+//! `crate::recovery`). The session comes back paused, the robot silent: the child may have
+//! been moved, the therapist decides when to go on. Its RESUME plays the next unplayed
+//! sequence from its start (an interrupted one again, as after a pause); every result, the
+//! state (L, F, PS), the command ids carried out and the task ids sent carry over, so nothing
+//! is played, scored or carried out twice.
+
+use super::{Current, GameManager, Phase, Session};
+use crate::protocol::{LogLevel, Output};
+use crate::recovery::RecoveredSession;
+use crate::sequence::SessionRng;
+use crate::session_file::{JournalEntry, SessionEnd};
+use sequence_game::{Emotion, Feedback, Level, State};
+
+/// GameState.status of a recovered session until the therapist acts.
+pub const RECOVERED_STATUS: &str = "recovered after a game manager restart; resume to go on";
+
+impl GameManager {
+    /// Session ids used before this node started (their files are in the sessions
+    /// directory): a START with one of them is refused, as within one run.
+    pub fn remember_sessions(&mut self, ids: impl IntoIterator<Item = String>) {
+        self.used_sessions.extend(ids);
+    }
+
+    /// Takes over `r` at start-up, in place of [`GameManager::initial_outputs`].
+    pub fn recover(&mut self, r: RecoveredSession, now: i64) -> Vec<Output> {
+        // Silence first: the dead node's last line may still be playing.
+        self.out.push(Output::Say(String::new()));
+        for d in &r.damage {
+            self.log(
+                LogLevel::Warn,
+                format!("recovering {:?}: {d}", r.session_id),
+            );
+        }
+        let next = r.next_index();
+        let last = r.records.last();
+        let state = last.map_or(Ok(State::START), |l| {
+            let res = &l.result;
+            State::new(
+                res.level.into(),
+                res.feedback.into(),
+                i64::from(res.level) * i64::from(res.outcome),
+            )
+        });
+        // Validated records always give a state; the start state is the safe answer anyway.
+        let state = state.unwrap_or(State::START);
+        let rng = self.replayed_rng(&r);
+        let pending_override = r
+            .pending_override
+            .and_then(|(i, l)| Level::new(l.into()).ok().map(|l| (i, l)));
+        let results: Vec<_> = r.records.iter().map(|x| x.result.clone()).collect();
+        self.used_sessions.insert(r.session_id.clone());
+        self.engagement.clear();
+        self.timers.clear();
+        self.current = Current {
+            // No reaction is due: the sequence is presented as soon as the action is known.
+            speech_done: true,
+            ..Current::default()
+        };
+        self.session = Some(Session {
+            id: r.session_id.clone(),
+            user_id: r.user_id.clone(),
+            cluster: r.user_model_cluster,
+            last_command_id: r.last_command_id,
+            rng,
+            state,
+            index: next,
+            next_sequence_id: r.last_task_id.saturating_add(1),
+            pending_override,
+            paused_since: Some(now),
+            held_since: None,
+            talk_start_ns: last.map_or(r.started_ns, |l| l.answered_ns),
+            started_ns: r.started_ns,
+            closed_task: None,
+            fallbacks: r.records.iter().filter(|x| x.policy_fallback).count() as u32,
+            overrides: results.iter().filter(|x| x.overridden).count() as u32,
+            rejected_commands: 0,
+            rejected_answers: r.records.iter().map(|x| x.rejected_answers).sum(),
+            results,
+        });
+        let played = r.records.len();
+        let planned = self.sequences();
+        if next > planned {
+            // Killed between the last record and the summary: nothing is left to play.
+            self.phase = Phase::Deciding;
+            self.end_session(
+                SessionEnd::Finished,
+                "all sequences played (summary written after a game manager restart)",
+                now,
+            );
+            return std::mem::take(&mut self.out);
+        }
+        self.out
+            .push(Output::Journal(Box::new(JournalEntry::Recovered {
+                session_id: r.session_id.clone(),
+                results: played as u8,
+                next_sequence: next,
+                damage: r.damage.clone(),
+                at_ns: now,
+            })));
+        let damaged = if r.damage.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {} damaged or doubtful line(s) in its files, see the log",
+                r.damage.len()
+            )
+        };
+        let line = format!(
+            "session {:?} {RECOVERED_STATUS} ({played} of {planned} sequences kept, \
+             sequence {next} next{damaged})",
+            r.session_id
+        );
+        self.log(LogLevel::Warn, line.clone());
+        self.out.push(Output::LiveLine(format!("!! {line}")));
+        self.set_phase(
+            Phase::Deciding,
+            format!("{RECOVERED_STATUS} (sequence {next}/{planned} next{damaged})"),
+            now,
+        );
+        std::mem::take(&mut self.out)
+    }
+
+    /// The session's random streams advanced past the recorded sequences, so the rest of the
+    /// session draws what an uninterrupted run would have (and an interrupted sequence is
+    /// said again with the same emotions).
+    fn replayed_rng(&mut self, r: &RecoveredSession) -> SessionRng {
+        let mut rng = SessionRng::new(self.params.seed, &r.session_id);
+        let max_run = self.params.max_identical_in_a_row as usize;
+        for (k, record) in r.records.iter().enumerate() {
+            let res = &record.result;
+            if usize::from(res.sequence_index) != k + 1 {
+                self.log(
+                    LogLevel::Warn,
+                    format!(
+                        "recovering {:?}: a sequence before {} is missing, so the sequences \
+                         from here on are drawn afresh",
+                        r.session_id, res.sequence_index
+                    ),
+                );
+                break;
+            }
+            let (Ok(level), Ok(feedback)) = (
+                Level::new(res.level.into()),
+                Feedback::new(res.feedback.into()),
+            ) else {
+                break;
+            };
+            let drawn = rng.sequence(level, max_run);
+            if feedback != Feedback::None {
+                rng.line(self.utterances.feedback_line_count(feedback));
+            }
+            let said: Vec<&str> = drawn.iter().map(|e: &Emotion| e.name()).collect();
+            if said != res.sequence {
+                self.log(
+                    LogLevel::Warn,
+                    format!(
+                        "recovering {:?}: sequence {} in the file is not what seed {} draws \
+                         (parameters changed?); the next sequences are drawn afresh",
+                        r.session_id, res.sequence_index, self.params.seed
+                    ),
+                );
+                break;
+            }
+        }
+        rng
+    }
+}
