@@ -1,16 +1,20 @@
 #!/usr/bin/env bash
 # Makes a TEST SROS2-layout keystore for the suite with openssl only: an identity CA, a
 # permissions CA, a signed domain governance and one enclave per node with its own identity
-# and signed permissions. Only /qt_therapy/tablet_bridge and /qt_therapy/therapist_console may
-# publish therapist commands; only /qt_therapy/engagement_classifier may publish engagement.
+# and signed permissions. Only /qt_therapy/tablet_bridge may publish therapist commands (the
+# therapist console too, where CONSOLE_MAY_COMMAND=1 asks for it); only
+# /qt_therapy/engagement_classifier may publish engagement.
 # The CA keys are unencrypted and kept in OUT_DIR/private: fine for tests, not for a clinic.
 #   usage: security/make_keystore.sh OUT_DIR [DOMAIN_MAX]
 #   env DATA_PROTECTION_KIND=NONE|SIGN|ENCRYPT (default NONE, see the governance below)
+#   env CONSOLE_MAY_COMMAND=1 lets /qt_therapy/therapist_console publish therapist commands
+#     (default 0: the therapist tablet, through the bridge, is the only way to command)
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: make_keystore.sh OUT_DIR [DOMAIN_MAX]" >&2; exit 2; }
 out=$1
 domain_max=${2:-232}
 data_protection=${DATA_PROTECTION_KIND:-NONE}
+console_may_command=${CONSOLE_MAY_COMMAND:-0}
 case $data_protection in NONE | SIGN | ENCRYPT) ;; *)
   echo "make_keystore.sh: DATA_PROTECTION_KIND must be NONE, SIGN or ENCRYPT" >&2; exit 2 ;;
 esac
@@ -58,7 +62,8 @@ sign() { # IN OUT: S/MIME signature by the permissions CA, as SROS2 does
 # encrypted) with one change: data_protection_kind NONE instead of ENCRYPT. RustDDS 0.15.1
 # pads an encoded payload to 4 bytes on the wire and its decoder then reads the padding as
 # part of the crypto footer, so every sample whose encoded length is not a multiple of 4
-# fails to decrypt (ring "Unspecified"; see /work/notes/security_report.md). With
+# fails to decrypt (ring "Unspecified"; README, DDS Security, and the ignored test
+# rustdds_payload_encryption_loses_samples_of_unaligned_length). With
 # metadata_protection_kind ENCRYPT the whole DATA submessage, payload included, is still
 # encrypted and authenticated on the wire; what is lost is only end-to-end payload
 # protection through a relay, which this suite does not use.
@@ -111,7 +116,10 @@ for enclave in "${enclaves[@]}"; do
   # so the deny rule comes before the general allow rule.
   denied=()
   case $enclave in
-    /qt_therapy/tablet_bridge | /qt_therapy/therapist_console) denied=("${engagement_topics[@]}") ;;
+    /qt_therapy/tablet_bridge) denied=("${engagement_topics[@]}") ;;
+    /qt_therapy/therapist_console)
+      denied=("${engagement_topics[@]}")
+      [ "$console_may_command" = 1 ] || denied+=("$command_topic") ;;
     /qt_therapy/engagement_classifier) denied=("$command_topic") ;;
     *) denied=("$command_topic" "${engagement_topics[@]}") ;;
   esac

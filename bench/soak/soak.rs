@@ -89,10 +89,13 @@ struct Cli {
     /// sessions run.
     #[arg(long, default_value_t = 0.0)]
     max_minutes: f64,
-    /// One console runs every session (`therapist run-session --sessions N`) instead of a new
-    /// console process, i.e. a new DDS participant, per session. Ignores --max-minutes.
+    /// A new console process, i.e. a new DDS participant, per session, instead of one console
+    /// running every session (`therapist run-session --sessions N`, as the robot's one
+    /// long-lived tablet bridge does). Each departed participant leaves RustDDS discovery data
+    /// in every node (README, Soak), so memory grows in this mode. Only this mode honours
+    /// --max-minutes.
     #[arg(long)]
-    one_console: bool,
+    console_per_session: bool,
     /// Give up on a session after this many seconds.
     #[arg(long, default_value_t = 120)]
     session_timeout: u64,
@@ -235,10 +238,10 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         run_id,
         every,
     };
-    let result = if cli.one_console {
-        drive_one_console(&driving)
-    } else {
+    let result = if cli.console_per_session {
         drive(&driving)
+    } else {
+        drive_one_console(&driving)
     };
     let launch_exit = launch.stop()?;
     let driven = result?;

@@ -13,5 +13,5 @@ shift || true
 OUT=${OUT:-out/soak-$(date +%Y%m%d-%H%M%S)}
 cargo build --workspace --bins
 mkdir -p "$OUT"
-tests/loopback-netns target/debug/soak --sessions "$SESSIONS" --out "$OUT" "$@" 2>&1 | tee "$OUT.log"
+tests/loopback-netns "${CARGO_TARGET_DIR:-target}/debug/soak" --sessions "$SESSIONS" --out "$OUT" "$@" 2>&1 | tee "$OUT.log"
 exit "${PIPESTATUS[0]}"

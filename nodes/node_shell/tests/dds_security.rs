@@ -340,7 +340,7 @@ fn unaligned_inside_the_namespace() {
         d,
         "unaligned",
         "raw_publish",
-        Some((ks, "/qt_therapy/therapist_console")),
+        Some((ks, "/qt_therapy/tablet_bridge")),
     );
     let sent_aligned = finish(aligned, d);
     let sent_unaligned = finish(unaligned, d);

@@ -70,11 +70,12 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
         runtime.block_on(inner());
         return;
     }
-    if which("chromium").is_none() || which("chromedriver").is_none() {
-        eprintln!(
-            "skipping: chromium and chromedriver are not installed \
-             (apt-get update && apt-get install -y chromium chromium-driver)"
-        );
+    if (which("chromium").is_none() || which("chromedriver").is_none())
+        && loopback_netns::skip_or_fail(
+            "chromium and chromedriver are not installed \
+             (apt-get update && apt-get install -y chromium chromium-driver)",
+        )
+    {
         return;
     }
     for b in SUITE_BINARIES {

@@ -51,6 +51,7 @@ enum Command {
 
 #[derive(clap::Args, Clone)]
 struct StartArgs {
+    /// The child's pseudonymous id: a code, never a name (it is stored as given).
     #[arg(long)]
     user: String,
     #[arg(long, default_value_t = -1)]

@@ -2,7 +2,8 @@
 //! (`tests/loopback-netns`): DDS discovery multicasts, and no packet may leave the machine.
 //! Two ways in: a bash script of processes, or the calling test itself run again inside.
 //! Where the machine cannot make a namespace (no root, no user namespaces) both say so and
-//! return None, so the test skips instead of talking to the network.
+//! return None, so the test skips instead of talking to the network; with
+//! [`REQUIRE_ALL_TESTS`] set (`tests/run.sh`, hence CI) they fail instead.
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
@@ -27,14 +28,32 @@ pub fn can_make_network_namespace() -> bool {
     ok(&["-n", "true"]) || ok(&["-rn", "true"])
 }
 
-fn cannot() -> bool {
-    if can_make_network_namespace() {
-        return false;
+/// Environment variable that turns a skipped test into a failed one. `tests/run.sh` installs
+/// everything the tests need and sets it, so CI cannot pass without running the DDS tests.
+pub const REQUIRE_ALL_TESTS: &str = "QT_REQUIRE_ALL_TESTS";
+
+/// Skips the calling test (after saying why), or fails it where [`REQUIRE_ALL_TESTS`] is set.
+/// Returns true when the test should return early.
+pub fn skip_or_fail(why: &str) -> bool {
+    skip_unless_required(
+        std::env::var_os(REQUIRE_ALL_TESTS).is_some_and(|v| v != "0"),
+        why,
+    )
+}
+
+fn skip_unless_required(required: bool, why: &str) -> bool {
+    if required {
+        panic!("{why}, and {REQUIRE_ALL_TESTS} is set: this test must run here");
     }
-    eprintln!(
-        "skipping: this machine cannot create a network namespace (need root or user namespaces)"
-    );
+    eprintln!("skipping: {why}");
     true
+}
+
+fn cannot() -> bool {
+    !can_make_network_namespace()
+        && skip_or_fail(
+            "this machine cannot create a network namespace (need root or user namespaces)",
+        )
 }
 
 /// Runs `script` with bash inside one fresh namespace, in the workspace root, killed after
@@ -121,4 +140,20 @@ fn wait_with_backstop(mut child: std::process::Child, deadline: Duration) -> Out
     child
         .wait_with_output()
         .expect("collecting the namespace's output")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_test_that_cannot_run_skips_where_nothing_requires_it() {
+        assert!(skip_unless_required(false, "no namespace"));
+    }
+
+    #[test]
+    #[should_panic(expected = "no namespace, and QT_REQUIRE_ALL_TESTS is set")]
+    fn a_test_that_cannot_run_fails_where_every_test_is_required() {
+        skip_unless_required(true, "no namespace");
+    }
 }
