@@ -428,6 +428,12 @@ echo "launch_exit=$?"
         .flat_map(|t| reader.messages::<StringMsg>(t).expect("robot topic"))
         .map(|m| (m.log_time, m.message.data))
         .collect();
+    let speech: Vec<(u64, String)> = reader
+        .messages::<StringMsg>(ROBOT_SPEECH.name)
+        .expect("robot speech")
+        .into_iter()
+        .map(|m| (m.log_time, m.message.data))
+        .collect();
     // The recorder cannot record its own loss; the console printed it, and its respawn carried
     // the dead one's file over (the results and tasks above are each in the one bag once).
     let console = read("stdout.log");
@@ -459,6 +465,14 @@ echo "launch_exit=$?"
         assert!(
             detected_s > LOSS_TIMEOUT_S - 0.3 && detected_s <= LOSS_TIMEOUT_S + 0.5,
             "{node}: detected {detected_s:.3} s after the kill"
+        );
+        // Silenced at the loss: an empty utterance cuts off whatever the robot was saying.
+        let silenced = speech
+            .iter()
+            .any(|(t, d)| d.is_empty() && t.abs_diff(lost.log_time) < 500_000_000);
+        assert!(
+            silenced,
+            "{node}: no empty utterance when it was found lost: {context}"
         );
         let said: Vec<&(u64, String)> = robot
             .iter()
