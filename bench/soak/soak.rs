@@ -639,23 +639,25 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
     let group = |id: &str| -> String { id.to_string() };
     let mut by_session: BTreeMap<String, SessionRecord> = BTreeMap::new();
     for r in &results {
-        by_session
-            .entry(group(&r.message.session_id))
-            .or_default()
-            .results
-            .push(r.message.sequence_index);
+        let e = by_session.entry(group(&r.message.session_id)).or_default();
+        e.results.push(r.message.sequence_index);
+        e.scored.insert(
+            r.message.sequence_index,
+            (r.message.answer.clone(), r.message.timed_out),
+        );
     }
     for t in &tasks {
         let e = by_session.entry(group(&t.message.session_id)).or_default();
         e.tasks.push(t.message.sequence_index);
         e.task_ids.push(t.message.sequence_id);
+        e.task_index
+            .insert(t.message.sequence_id, t.message.sequence_index);
     }
     for a in &answers {
-        by_session
-            .entry(group(&a.message.session_id))
-            .or_default()
-            .answers
-            .push(a.message.sequence_id);
+        let e = by_session.entry(group(&a.message.session_id)).or_default();
+        e.answers.push(a.message.sequence_id);
+        e.answer_of_task
+            .insert(a.message.sequence_id, a.message.answer.clone());
     }
     for d in &decisions {
         by_session
@@ -703,6 +705,31 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
         if answered != task_ids.iter().copied().collect::<Vec<_>>() || task_ids.len() != 10 {
             problems.push(format!("answers {:?} to tasks {task_ids:?}", e.answers));
         }
+        // What the game manager scored is what the child answered: no result timed out (the
+        // simulated child always answers), and each result holds its task's answer as the bag
+        // has it, so an answer lost between the tablet and the game manager cannot pass.
+        let mismatched: Vec<u8> = e
+            .answer_of_task
+            .iter()
+            .filter_map(|(task, answer)| {
+                let index = *e.task_index.get(task)?;
+                match e.scored.get(&index) {
+                    Some((scored, false)) if scored == answer => None,
+                    _ => Some(index),
+                }
+            })
+            .collect();
+        let timed_out: Vec<u8> = e
+            .scored
+            .iter()
+            .filter(|(_, (_, t))| *t)
+            .map(|(i, _)| *i)
+            .collect();
+        if !mismatched.is_empty() || !timed_out.is_empty() {
+            problems.push(format!(
+                "results not as answered: sequences {mismatched:?}; timed out: {timed_out:?}"
+            ));
+        }
         let mut steps = e.decisions.clone();
         steps.sort_unstable();
         let decided: BTreeSet<u8> = steps.iter().copied().collect();
@@ -738,8 +765,8 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
     }
     let n = driven.sessions.len();
     println!(
-        "\nsessions: {n} run, {} complete (10 results 1..10, 10 tasks each answered once, a \
-         decision per sequence but {fallbacks} policy fallbacks, the start acknowledged once, \
+        "\nsessions: {n} run, {} complete (10 results 1..10 as answered, none timed out, 10 tasks \
+         each answered once, a decision per sequence but {fallbacks} policy fallbacks, the start acknowledged once, \
          FINISHED, session file of 10 records)",
         n - bad.len()
     );
@@ -788,6 +815,12 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
 #[derive(Default)]
 struct SessionRecord {
     results: Vec<u8>,
+    /// Sequence index -> (the answer scored, timed out).
+    scored: BTreeMap<u8, (Vec<String>, bool)>,
+    /// Task id -> its sequence index.
+    task_index: BTreeMap<u32, u8>,
+    /// Task id -> the answer the bag holds for it.
+    answer_of_task: BTreeMap<u32, Vec<String>>,
     tasks: Vec<u8>,
     task_ids: Vec<u32>,
     answers: Vec<u32>,
