@@ -249,6 +249,7 @@ pid=$(grep -oE "(started|restarted) {node} \(pid [0-9]+\)" "$o/stderr.log" | tai
 cp "$o/q_tables/cluster_0.json" "$o/q_table_before_{node}.json" 2>/dev/null
 echo "killed {node} pid $pid at $EPOCHREALTIME"
 kill -KILL "$pid"
+wait_for 'node lost: {node}' && echo "console showed {node} lost at $EPOCHREALTIME"
 wait_for '{node} is back' || fail
 "#
     )
@@ -441,6 +442,18 @@ echo "launch_exit=$?"
         console.contains("node lost: bag_recorder") && console.contains("bag_recorder is back"),
         "{context}"
     );
+    // Its detection, as the console showed it (the script polls every 50 ms).
+    let recorder_lost_s = script_out
+        .lines()
+        .find_map(|l| l.strip_prefix("console showed bag_recorder lost at "))
+        .and_then(|t| t.trim().parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("the console did not show the recorder lost: {context}"))
+        - killed_at("bag_recorder");
+    assert!(
+        recorder_lost_s > LOSS_TIMEOUT_S - 0.3 && recorder_lost_s <= LOSS_TIMEOUT_S + 1.0,
+        "the console showed the recorder lost {recorder_lost_s:.3} s after the kill"
+    );
+    eprintln!("bag_recorder: SIGKILL -> the console showed it lost {recorder_lost_s:.3} s");
     for (node, _) in kills
         .iter()
         .filter(|(n, _)| !["bag_recorder", "game_manager"].contains(n))
