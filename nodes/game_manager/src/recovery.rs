@@ -255,24 +255,17 @@ pub fn recover_session(
     })
 }
 
-/// The checks a START command passed, for a start entry read back.
+/// A start entry holds what its START command held: checked as that command is.
 fn check_start(session_id: &str, user_id: &str, cluster: i32) -> Result<(), String> {
-    let bad_id = |id: &str| {
-        id.is_empty()
-            || id.len() > qt_therapy_msgs::validate::MAX_ID_LEN
-            || id.chars().any(char::is_control)
-    };
-    if bad_id(session_id) || bad_id(user_id) {
-        return Err(format!(
-            "start entry with session {session_id:?}, user {user_id:?}: not valid ids"
-        ));
+    qt_therapy_msgs::TherapistCommand {
+        command: qt_therapy_msgs::TherapistCommand::START,
+        session_id: session_id.to_string(),
+        user_id: user_id.to_string(),
+        user_model_cluster: cluster,
+        ..Default::default()
     }
-    if !(-1..=63).contains(&cluster) {
-        return Err(format!(
-            "start entry with cluster {cluster}: outside -1..=63"
-        ));
-    }
-    Ok(())
+    .validate()
+    .map_err(|e| format!("start entry not valid as a START: {e}"))
 }
 
 /// Which unfinished session a start-up at `now_ns` takes over: the one with the latest

@@ -10,7 +10,7 @@ use crate::protocol::{LogLevel, Output};
 use crate::recovery::RecoveredSession;
 use crate::sequence::SessionRng;
 use crate::session_file::{JournalEntry, SessionEnd};
-use sequence_game::{Emotion, Feedback, Level, State};
+use sequence_game::{Emotion, Feedback, Level, Outcome, State};
 
 /// GameState.status of a recovered session until the therapist acts.
 pub const RECOVERED_STATUS: &str = "recovered after a game manager restart; resume to go on";
@@ -34,16 +34,20 @@ impl GameManager {
         }
         let next = r.next_index();
         let last = r.records.last();
-        let state = last.map_or(Ok(State::START), |l| {
-            let res = &l.result;
-            State::new(
-                res.level.into(),
-                res.feedback.into(),
-                i64::from(res.level) * i64::from(res.outcome),
-            )
-        });
-        // Validated records always give a state; the start state is the safe answer anyway.
-        let state = state.unwrap_or(State::START);
+        // The state after the last result, as scoring it made it (outcome.rs): its level and
+        // feedback, PS = its score. Validated records always give one; the start state is
+        // the safe answer anyway.
+        let state = last
+            .and_then(|l| {
+                let res = &l.result;
+                let level = Level::new(res.level.into()).ok()?;
+                Some(State {
+                    level: level.get(),
+                    feedback: Feedback::new(res.feedback.into()).ok()?,
+                    previous_score: Outcome::new(res.outcome.into()).ok()?.score(level),
+                })
+            })
+            .unwrap_or(State::START);
         let rng = self.replayed_rng(&r);
         let pending_override = r
             .pending_override
