@@ -5,6 +5,7 @@
 //! sans-IO: their binaries only move messages between these channels and the core.
 
 pub mod drops;
+pub mod heartbeat_watch;
 pub mod logging;
 pub mod params;
 pub mod security;

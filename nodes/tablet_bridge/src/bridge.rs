@@ -94,6 +94,7 @@ impl Bridge {
     /// A bridge with validated `params`, started at `now`.
     pub fn new(params: TabletBridgeParams, now: Now) -> Self {
         let failures = f64::from(params.pin_max_failures);
+        let gm_watch = GameManagerWatch::new(params.game_manager_loss_timeout_s);
         Bridge {
             pin_budget: TokenBucket::new(failures, failures / 60.0, now.monotonic),
             params,
@@ -108,7 +109,7 @@ impl Bridge {
             current_session: None,
             command_ids: CommandIds::default(),
             last_emergency_stop: None,
-            gm_watch: GameManagerWatch::default(),
+            gm_watch,
         }
     }
 

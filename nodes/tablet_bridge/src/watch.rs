@@ -2,11 +2,13 @@
 //! manager publishes no state to say so). Silent for `game_manager_loss_timeout_s`, it is
 //! lost: the therapist page's status says so and the child page shows the game paused (an
 //! answer could reach no one); its first heartbeat again (a respawned node) says it is back.
-//! The robot needs nothing from here: without a game manager nothing commands it. Watching
-//! starts with the first heartbeat, so a bridge that never hears one (a replay) shows nothing.
+//! The robot needs nothing from here: without a game manager nothing commands it. The
+//! bookkeeping is the shared [`HeartbeatWatch`]'s: watching starts with the first heartbeat, so
+//! a bridge that never hears one (a replay) shows nothing.
 
 use crate::bridge::{Bridge, Now, Output};
 use crate::protocol::{GameView, Role, ServerMessage};
+use node_shell::heartbeat_watch::{Heard, HeartbeatWatch};
 use qt_therapy_msgs::{GameState, Heartbeat};
 use std::time::Duration;
 
@@ -14,56 +16,56 @@ use std::time::Duration;
 pub const GAME_MANAGER_NODE: &str = "game_manager";
 
 /// The game manager, as its heartbeats tell.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub(crate) struct GameManagerWatch {
-    /// Arrival of its last heartbeat; None until the first.
-    last: Option<Duration>,
-    pid: u32,
-    /// Since when it is lost.
-    lost_since: Option<Duration>,
+    heartbeats: HeartbeatWatch,
     /// What the therapist page's status starts with while lost, or just after it came back.
     pub(crate) notice: Option<String>,
 }
 
 impl GameManagerWatch {
+    /// Lost after `timeout_s` without a heartbeat (validated; 4 s if it is not a duration).
+    pub(crate) fn new(timeout_s: f64) -> Self {
+        let timeout = Duration::try_from_secs_f64(timeout_s).unwrap_or(Duration::from_secs(4));
+        GameManagerWatch {
+            heartbeats: HeartbeatWatch::new([GAME_MANAGER_NODE], timeout),
+            notice: None,
+        }
+    }
+
     pub(crate) fn lost(&self) -> bool {
-        self.lost_since.is_some()
+        self.heartbeats.is_lost(GAME_MANAGER_NODE)
     }
 }
 
-impl Bridge {
-    fn loss_timeout(&self) -> Duration {
-        Duration::try_from_secs_f64(self.params.game_manager_loss_timeout_s)
-            .unwrap_or(Duration::from_secs(4))
-    }
+/// The bridge's monotonic clock in the watch's nanoseconds.
+fn nanos(t: Duration) -> i64 {
+    i64::try_from(t.as_nanos()).unwrap_or(i64::MAX)
+}
 
+fn seconds(ns: i64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+impl Bridge {
     /// When [`Bridge::tick`] must next be called (monotonic), if at all.
     pub fn next_deadline(&self) -> Option<Duration> {
-        let w = &self.gm_watch;
-        match (w.last, w.lost()) {
-            (Some(last), false) => Some(last.saturating_add(self.loss_timeout())),
-            _ => None,
-        }
+        let ns = self.gm_watch.heartbeats.next_deadline_ns()?;
+        Some(Duration::from_nanos(u64::try_from(ns).unwrap_or(0)))
     }
 
     /// The clock reached a deadline of [`Bridge::next_deadline`].
     pub fn tick(&mut self, now: Now) -> Vec<Output> {
         let mut out = Vec::new();
-        let timeout = self.loss_timeout();
         let w = &mut self.gm_watch;
-        let Some(last) = w.last.filter(|_| w.lost_since.is_none()) else {
+        let Some(lost) = w.heartbeats.check(nanos(now.monotonic)).pop() else {
             return out;
         };
-        let silent = now.monotonic.saturating_sub(last);
-        if silent < timeout {
-            return out;
-        }
-        w.lost_since = Some(now.monotonic);
         let notice = format!(
             "game manager lost: no heartbeat for {:.1} s (last pid {}); the robot gets no \
              commands and answers cannot count until it is back",
-            silent.as_secs_f64(),
-            w.pid
+            seconds(lost.silent_ns),
+            lost.last_pid.unwrap_or(0)
         );
         tracing::warn!("{notice}");
         w.notice = Some(notice);
@@ -72,29 +74,26 @@ impl Bridge {
     }
 
     pub(crate) fn heartbeat(&mut self, hb: &Heartbeat, now: Now, out: &mut Vec<Output>) {
-        if hb.node_name != GAME_MANAGER_NODE {
-            return;
-        }
         let w = &mut self.gm_watch;
-        let restarted = w.last.is_some() && w.pid != hb.pid;
-        let old_pid = w.pid;
-        let previous = w.last.replace(now.monotonic);
-        w.pid = hb.pid;
-        if w.lost_since.take().is_some() {
-            let silent = previous.map_or(Duration::ZERO, |p| now.monotonic.saturating_sub(p));
-            let back = format!(
-                "game manager back (pid {}) after {:.1} s without a heartbeat",
-                hb.pid,
-                silent.as_secs_f64()
-            );
-            tracing::info!("{back}");
-            w.notice = Some(back);
-            self.show_game(out);
-        } else if restarted {
-            tracing::warn!(
+        match w
+            .heartbeats
+            .heartbeat(&hb.node_name, hb.pid, nanos(now.monotonic))
+        {
+            Heard::Unwatched | Heard::WatchStarted | Heard::Alive => {}
+            Heard::Back { silent_ns, .. } => {
+                let back = format!(
+                    "game manager back (pid {}) after {:.1} s without a heartbeat",
+                    hb.pid,
+                    seconds(silent_ns)
+                );
+                tracing::info!("{back}");
+                w.notice = Some(back);
+                self.show_game(out);
+            }
+            Heard::Restarted { old_pid } => tracing::warn!(
                 "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
                 hb.pid
-            );
+            ),
         }
     }
 

@@ -22,6 +22,7 @@ use crate::scoring::EngagementLog;
 use crate::sequence::SessionRng;
 use crate::session_file::SessionEnd;
 use crate::utterances::{RobotAct, Utterances};
+use node_shell::heartbeat_watch::HeartbeatWatch;
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
@@ -128,8 +129,8 @@ pub struct GameManager {
     timers: BTreeMap<u64, Timer>,
     next_timer_id: u64,
     next_request_id: u64,
-    /// Watched nodes by name; empty until the first heartbeat.
-    watched: BTreeMap<String, watch::Watched>,
+    /// The heartbeats of `watched_nodes`.
+    watched: HeartbeatWatch,
     /// The heartbeat watchdog's timer id, while one is set.
     watchdog: Option<u64>,
     status: String,
@@ -139,6 +140,7 @@ pub struct GameManager {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
+        let watched = watch::node_watch(&params.watched_nodes, params.node_loss_timeout_s);
         Ok(GameManager {
             utterances: Utterances::from_params(&params),
             params,
@@ -150,7 +152,7 @@ impl GameManager {
             timers: BTreeMap::new(),
             next_timer_id: 1,
             next_request_id: 1,
-            watched: BTreeMap::new(),
+            watched,
             watchdog: None,
             status: "waiting for a therapist to start a session".into(),
             out: Vec::new(),

@@ -1,40 +1,29 @@
-//! Watching the other nodes' heartbeats (RustDDS reports no DDS liveliness, so the suite has
-//! its own, as Nav2's bond does). A watched node silent for `node_loss_timeout_s` is lost: the
+//! What the game manager does when a node it watches (`watched_nodes`, bookkept by the shared
+//! [`HeartbeatWatch`]) goes silent for `node_loss_timeout_s`. A lost node means: the
 //! robot is silenced and the session held (paused, not lost) until every watched node is
 //! back; then it resumes by itself, or waits for the therapist's resume. One watchdog timer,
 //! due when the earliest-heard node would time out, so a loss is seen exactly at the timeout.
 
 use super::GameManager;
 use crate::protocol::{LogLevel, Output};
+use node_shell::heartbeat_watch::{Heard, HeartbeatWatch};
 use qt_therapy_msgs::Heartbeat;
-
-/// A watched node, as its heartbeats tell.
-#[derive(Debug, Clone)]
-pub(super) struct Watched {
-    /// Arrival of its last heartbeat (start of the watch for a node not heard yet).
-    last_ns: i64,
-    heard: bool,
-    pid: u32,
-    /// Since when it is lost.
-    lost_since: Option<i64>,
-}
+use std::time::Duration;
 
 fn seconds(ns: i64) -> f64 {
     ns as f64 * 1e-9
 }
 
-impl GameManager {
-    fn loss_timeout_ns(&self) -> i64 {
-        (self.params.node_loss_timeout_s * 1e9).round() as i64
-    }
+/// The watch over `watched_nodes` (the timeout is validated, 0.2 to 600 s).
+pub(super) fn node_watch(names: &[String], timeout_s: f64) -> HeartbeatWatch {
+    let timeout = Duration::try_from_secs_f64(timeout_s).unwrap_or(Duration::from_secs(4));
+    HeartbeatWatch::new(names.iter().cloned(), timeout)
+}
 
+impl GameManager {
     /// Watched nodes lost now, by name.
     pub fn lost_nodes(&self) -> Vec<&str> {
-        self.watched
-            .iter()
-            .filter(|(_, w)| w.lost_since.is_some())
-            .map(|(n, _)| n.as_str())
-            .collect()
+        self.watched.lost()
     }
 
     /// "a, b" of the lost nodes.
@@ -43,38 +32,24 @@ impl GameManager {
     }
 
     pub(super) fn on_heartbeat(&mut self, hb: Heartbeat, now: i64) {
-        if !self.params.watched_nodes.contains(&hb.node_name) {
-            return;
-        }
-        if self.watched.is_empty() {
-            // A core that hears no heartbeat (a replay, a unit test) watches nothing; from
-            // the first one on, a node never heard is lost one timeout later.
-            for name in &self.params.watched_nodes {
-                let w = Watched {
-                    last_ns: now,
-                    heard: false,
-                    pid: 0,
-                    lost_since: None,
-                };
-                self.watched.insert(name.clone(), w);
+        let old_pid = match self.watched.heartbeat(&hb.node_name, hb.pid, now) {
+            Heard::Unwatched => return,
+            Heard::Alive => None,
+            Heard::WatchStarted => {
+                let names = self.watched.names().join(", ");
+                self.log(
+                    LogLevel::Info,
+                    format!("watching the heartbeats of {names}"),
+                );
+                None
             }
-            let names = self.params.watched_nodes.join(", ");
-            self.log(
-                LogLevel::Info,
-                format!("watching the heartbeats of {names}"),
-            );
-        }
-        let Some(w) = self.watched.get_mut(&hb.node_name) else {
-            return;
+            Heard::Restarted { old_pid } => Some(old_pid),
+            Heard::Back { lost_for_ns, .. } => {
+                self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now);
+                None
+            }
         };
-        let restarted = w.heard && w.pid != hb.pid;
-        let old_pid = w.pid;
-        w.last_ns = now;
-        w.heard = true;
-        w.pid = hb.pid;
-        if let Some(since) = w.lost_since.take() {
-            self.on_node_back(&hb.node_name, hb.pid, now - since, now);
-        } else if restarted {
+        if let Some(old_pid) = old_pid {
             // Back within the timeout: it was never lost, but its state is new.
             self.log(
                 LogLevel::Warn,
@@ -87,19 +62,12 @@ impl GameManager {
         self.arm_watchdog();
     }
 
-    /// Sets the watchdog for the earliest deadline among the nodes not lost, unless one is set.
+    /// Sets the watchdog for the watch's next deadline, unless one is set.
     fn arm_watchdog(&mut self) {
         if self.watchdog.is_some() {
             return;
         }
-        let timeout = self.loss_timeout_ns();
-        let due = self
-            .watched
-            .values()
-            .filter(|w| w.lost_since.is_none())
-            .map(|w| w.last_ns + timeout)
-            .min();
-        if let Some(at_ns) = due {
+        if let Some(at_ns) = self.watched.next_deadline_ns() {
             let id = self.next_timer_id;
             self.next_timer_id += 1;
             self.watchdog = Some(id);
@@ -109,22 +77,22 @@ impl GameManager {
 
     pub(super) fn on_watchdog(&mut self, now: i64) {
         self.watchdog = None;
-        let timeout = self.loss_timeout_ns();
-        let mut lost = Vec::new();
-        for (name, w) in self.watched.iter_mut() {
-            if w.lost_since.is_none() && now - w.last_ns >= timeout {
-                w.lost_since = Some(now);
-                let last = if w.heard {
-                    format!("last pid {}", w.pid)
-                } else {
-                    "never heard".to_string()
+        let lost: Vec<String> = self
+            .watched
+            .check(now)
+            .into_iter()
+            .map(|l| {
+                let last = match l.last_pid {
+                    Some(pid) => format!("last pid {pid}"),
+                    None => "never heard".to_string(),
                 };
-                lost.push(format!(
-                    "{name} (no heartbeat for {:.1} s, {last})",
-                    seconds(now - w.last_ns)
-                ));
-            }
-        }
+                format!(
+                    "{} (no heartbeat for {:.1} s, {last})",
+                    l.name,
+                    seconds(l.silent_ns)
+                )
+            })
+            .collect();
         if !lost.is_empty() {
             self.on_nodes_lost(&lost.join(", "), now);
         }
