@@ -574,9 +574,32 @@ echo "launch_exit=$?"
             }),
         "decisions per step: {decided:?}"
     );
+    // Decisions are durable: the respawned recorder was sent those made while it was down, so
+    // every sequence the policy set up has its decision (Q-values and all) in the bag.
+    let decided_by_policy: Vec<usize> = records
+        .iter()
+        .filter(|r| r["policy_fallback"] == false && r["result"]["overridden"] != true)
+        .filter_map(|r| r["result"]["sequence_index"].as_u64())
+        .map(|i| i as usize)
+        .collect();
+    let missing: Vec<usize> = decided_by_policy
+        .iter()
+        .copied()
+        .filter(|&i| decided[i] == 0)
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "no decision in the bag for sequences {missing:?} (decisions per step {decided:?})"
+    );
+    let fallbacks: Vec<u64> = records
+        .iter()
+        .filter(|r| r["policy_fallback"] == true)
+        .filter_map(|r| r["result"]["sequence_index"].as_u64())
+        .collect();
     eprintln!(
         "game_manager: SIGKILL -> bridge showed it lost {bridge_lost_s:.3} s; recovered at \
-         sequence {interrupted}, resumed {:.1} s after the kill; decisions per step {:?}",
+         sequence {interrupted}, resumed {:.1} s after the kill; decisions per step {:?}, \
+         policy fallbacks at sequences {fallbacks:?}",
         carried_out[0].log_time as f64 * 1e-9 - killed_at,
         &decided[1..]
     );
@@ -611,7 +634,9 @@ echo "launch_exit=$?"
          whole run {:.1} s",
         wall.as_secs_f64()
     );
-    let _ = std::fs::remove_dir_all(&out);
+    if std::env::var_os("QT_KEEP_TEST_OUTPUT").is_none() {
+        let _ = std::fs::remove_dir_all(&out);
+    }
 }
 
 /// Sequence results recorded after `t` (log time, ns).

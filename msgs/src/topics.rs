@@ -117,7 +117,9 @@ pub const SEQUENCE_RESULT: Topic<SequenceResult> =
 pub const TABLET_TASK: Topic<TabletTask> = Topic::new("/qt_therapy/tablet/task", QosKind::State);
 pub const TABLET_ANSWER: Topic<TabletAnswer> =
     Topic::new("/qt_therapy/tablet/answer", QosKind::Reliable);
-pub const DECISION: Topic<Decision> = Topic::new("/qt_therapy/policy/decision", QosKind::Reliable);
+// Durable, like results: a respawned recorder is sent the decisions made while it was down,
+// so the bag keeps every decision's Q-values (the game manager gets its answer by the service).
+pub const DECISION: Topic<Decision> = Topic::new("/qt_therapy/policy/decision", QosKind::Durable);
 pub const USER_MODEL_INFO: Topic<UserModelInfo> =
     Topic::new("/qt_therapy/user_model/models", QosKind::State);
 pub const HEARTBEAT: Topic<Heartbeat> = Topic::new("/qt_therapy/heartbeat", QosKind::Reliable);

@@ -336,12 +336,17 @@ impl GameManager {
             _ => {
                 self.status = why.to_string();
                 self.publish_state(now);
-                // A recovered session has neither an action nor a request for its next
-                // sequence: ask now rather than at recovery, when the policy may not be up.
-                if self.phase == Phase::Deciding
-                    && self.current.plan.is_none()
-                    && self.current.request_id.is_none()
-                {
+                // No action for the sequence yet: a recovered session (asked now rather than
+                // at recovery, when the policy may not be up), a request that ran out while
+                // the session was held or paused, or one still pending, which may have gone
+                // to a policy that died meanwhile (its answer, if any, is then superseded).
+                if self.phase == Phase::Deciding && self.current.plan.is_none() {
+                    if let Some(old) = self.current.request_id.take() {
+                        self.log(
+                            LogLevel::Info,
+                            format!("asking the policy again (request {old} still unanswered)"),
+                        );
+                    }
                     self.request_decision(now);
                 }
                 self.maybe_present(now);

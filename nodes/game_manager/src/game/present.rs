@@ -132,7 +132,20 @@ impl GameManager {
                 if self.phase == Phase::Deciding && self.current.request_id == Some(request_id) {
                     self.current.request_id = None;
                     let s = self.params.policy_deadline_s;
-                    self.fall_back(format!("the policy did not answer within {s} s"), now);
+                    if self.paused() {
+                        // Nothing plays while held (a lost policy is the likely cause) or
+                        // paused, so waiting costs the child nothing: the policy is asked
+                        // again when the session goes on, rather than a fallback played.
+                        self.log(
+                            LogLevel::Info,
+                            format!(
+                                "the policy did not answer within {s} s while the session was \
+                                 paused or held; it is asked again when the session goes on"
+                            ),
+                        );
+                    } else {
+                        self.fall_back(format!("the policy did not answer within {s} s"), now);
+                    }
                 }
             }
             Timer::SpeechDone => {

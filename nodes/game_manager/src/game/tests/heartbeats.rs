@@ -7,7 +7,7 @@ use super::harness::*;
 use crate::params::GameManagerParams;
 use crate::protocol::{Input, Output};
 use crate::session_file::SessionEnd;
-use qt_therapy_msgs::{GameState, TherapistCommand as C};
+use qt_therapy_msgs::{DecideActionRequest, GameState, TherapistCommand as C};
 
 const POLICY: &str = "behaviour_policy";
 const CLASSIFIER: &str = "engagement_classifier";
@@ -261,4 +261,86 @@ fn a_therapist_resume_during_a_hold_leaves_the_hold_to_the_node() {
     assert_eq!(h.last_state().phase, GameState::SAYING_SEQUENCE);
     h.run_until(T0 + 400 * S);
     assert_eq!(sequence_indices(&h), (1..=10).collect::<Vec<u8>>());
+}
+
+/// When the game manager asks the policy for `step` in an undisturbed session.
+fn decide_time(step: u8) -> i64 {
+    let mut h = Harness::new(params(true), rule_policy(), scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 400 * S);
+    h.log
+        .iter()
+        .find_map(|(t, o)| match o {
+            Output::Decide { request, .. } if request.step == step => Some(*t),
+            _ => None,
+        })
+        .expect("a request for the step")
+}
+
+/// The policy (silent to its first request for sequence 2, as a dead process is) stops its
+/// heartbeats `dies_before_s` before that request and is back `back_after_s` after it. Runs
+/// the session; returns it with the times of the requests for sequence 2.
+fn policy_dies_around_step_2(dies_before_s: f64, back_after_s: f64) -> (Harness, Vec<i64>) {
+    let t2 = decide_time(2);
+    let mut asked = 0;
+    let policy: Box<dyn FnMut(&DecideActionRequest) -> PolicyReply> = Box::new(move |req| {
+        if req.step == 2 {
+            asked += 1;
+            if asked == 1 {
+                return PolicyReply::Silent;
+            }
+        }
+        PolicyReply::Answer {
+            after_s: 0.05,
+            response: rule_decision(req),
+        }
+    });
+    let mut h = Harness::new(params(true), policy, scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, t2 - ns(dies_before_s));
+    h.heartbeats(POLICY, 21, t2 + ns(back_after_s), T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 400 * S);
+    let requests = h
+        .log
+        .iter()
+        .filter_map(|(t, o)| match o {
+            Output::Decide { request, .. } if request.step == 2 => Some(*t - t2),
+            _ => None,
+        })
+        .collect();
+    (h, requests)
+}
+
+#[test]
+fn a_request_that_runs_out_while_held_asks_the_policy_again_instead_of_falling_back() {
+    // Dead 3 s before the request: lost 1 s after it (the heartbeat timeout, 4 s), held when
+    // the policy deadline (2 s) runs out; back at +10 s and asked again then.
+    let (h, requests) = policy_dies_around_step_2(3.0, 10.0);
+    assert_eq!(
+        requests,
+        vec![0, 10 * S],
+        "asked again when the policy is back"
+    );
+    assert!(
+        h.warnings().iter().all(|w| !w.contains("fallback")),
+        "no fallback while held: {:?}",
+        h.warnings()
+    );
+    let records = h.records();
+    assert_eq!(records.len(), 10);
+    assert!(records.iter().all(|r| !r.policy_fallback));
+    assert_eq!(h.summaries()[0].policy_fallbacks, 0);
+}
+
+#[test]
+fn a_request_still_pending_when_the_policy_is_back_is_asked_again() {
+    // Dead 3.5 s before the request: lost 0.4 s after it, back at +1.5 s, before the deadline
+    // (+2 s): the request went to the dead process, so the new one is asked at once.
+    let (h, requests) = policy_dies_around_step_2(3.5, 1.5);
+    assert_eq!(requests, vec![0, ns(1.5)]);
+    assert!(h.records().iter().all(|r| !r.policy_fallback));
+    assert_eq!(h.results().len(), 10);
 }
