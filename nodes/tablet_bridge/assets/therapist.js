@@ -209,6 +209,11 @@ function onMessage(m) {
     case "logged_in":
       loggedIn = true;
       $("login-error").textContent = "";
+      // The bridge sends everything it holds after a login: a page logging in again (it
+      // reconnected, or the bridge was restarted) starts its tables afresh, not twice over.
+      $("decisions").tBodies[0].replaceChildren();
+      $("results").tBodies[0].replaceChildren();
+      showTotal();
       show("main");
       break;
     case "game": showGame(m); break;

@@ -6,7 +6,8 @@
 //! does: it listens to `/qt_robot/speech/say` over DDS (and to the tasks, decisions and answers,
 //! to check what crossed). It is the camera too: 30 fps of SYNTHETIC faces looking at the robot
 //! (the classifier's generator) for the real classifier. Bad input from both pages is refused
-//! on the way. Everything runs inside one private loopback-only network namespace: the test
+//! on the way, and mid-session the bridge itself is SIGKILLed: the launcher respawns it and
+//! both pages reconnect to it by themselves. Everything runs inside one private loopback-only network namespace: the test
 //! re-runs itself in there.
 //!
 //! Needs Debian's `chromium` and `chromium-driver` (skips with a message where they are absent)
@@ -45,6 +46,9 @@ const GAME_ARGS: &str = "--param time_scale:=0.05 --param answer_timeout_s:=600 
 /// pauses, overrides the next level to 3 and resumes.
 const WRONG_AT: usize = 5;
 const OVERRIDE_AT: usize = 2;
+/// While sequence BRIDGE_KILLED_AT waits for the child's answer, the tablet bridge is
+/// SIGKILLed; the launcher respawns it (5 s) and both pages reconnect by themselves.
+const BRIDGE_KILLED_AT: usize = 8;
 /// The suite's binaries the launch file starts, besides this crate's own.
 const SUITE_BINARIES: [&str; 6] = [
     "launch",
@@ -107,6 +111,12 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
         out.status.success(),
         "inside the namespace:\n{stdout}\n{stderr}"
     );
+    for line in stderr
+        .lines()
+        .filter(|l| l.starts_with("tablet_bridge SIGKILLed"))
+    {
+        eprintln!("{line}");
+    }
     eprintln!("browser test passed; screenshots in {}", shots.display());
 }
 
@@ -308,7 +318,7 @@ async fn inner() {
     };
     let run = std::panic::AssertUnwindSafe(async {
         ports.await;
-        session(&shots, &ears).await
+        session(&shots, &ears, &logs).await
     });
     let sessions = match futures::FutureExt::catch_unwind(run).await {
         Ok(s) => s,
@@ -436,6 +446,85 @@ async fn wait_for_task_on_child(child: &Page, task: &TabletTask) {
         .await;
 }
 
+/// True while `page` shows its "offline" banner (its WebSocket is closed).
+async fn offline(page: &Page) -> bool {
+    page.js(
+        "return !document.getElementById('offline').classList.contains('hidden');",
+        vec![],
+    )
+    .await
+        == json!(true)
+}
+
+/// The tablet bridge's pid, as the launcher last (re)started it.
+fn bridge_pid(logs: &Logs) -> Option<String> {
+    logs.read("launch.err").lines().rev().find_map(|l| {
+        let rest = l
+            .strip_prefix("[launch] started tablet_bridge (pid ")
+            .or_else(|| l.strip_prefix("[launch] restarted tablet_bridge (pid "))?;
+        rest.split(')').next().map(str::to_string)
+    })
+}
+
+/// SIGKILLs the tablet bridge while the child's `task` is on screen: both pages show they
+/// are offline; the launcher respawns the bridge; both pages reconnect by themselves (the
+/// therapist page logs in again with the PIN it kept in memory), get the game back from the
+/// respawned bridge (durable results and decisions, the latched task and state), and the
+/// child finds the same task waiting, with nothing tapped lost to the game.
+async fn bridge_killed_and_back(
+    child: &Page,
+    therapist: &Page,
+    task: &TabletTask,
+    logs: &Logs,
+    shots: &Path,
+) {
+    let results_shown = therapist.count("#results tbody tr.result").await;
+    let decisions_shown = therapist.count("#decisions tbody tr").await;
+    let pid = bridge_pid(logs).unwrap_or_else(|| panic!("no bridge pid\n{}", logs.dump()));
+    let killed = std::time::Instant::now();
+    let status = Command::new("kill")
+        .args(["-KILL", &pid])
+        .status()
+        .expect("kill");
+    assert!(status.success(), "kill -KILL {pid}");
+    until("both pages offline", WAIT, || async {
+        (offline(child).await && offline(therapist).await).then_some(())
+    })
+    .await;
+    let offline_after = killed.elapsed();
+    child.screenshot(shots, "child_offline_800x1280").await;
+    until("the launcher restarted the bridge", WAIT, || async {
+        bridge_pid(logs).filter(|p| *p != pid).map(|_| ())
+    })
+    .await;
+    until("both pages back online", WAIT, || async {
+        (!offline(child).await && !offline(therapist).await).then_some(())
+    })
+    .await;
+    let online_after = killed.elapsed();
+    wait_for_task_on_child(child, task).await;
+    let task_after = killed.elapsed();
+    // The game manager held the session while the bridge was lost and resumed it when the
+    // bridge was back: the therapist page, logged in again, shows the game as it was.
+    therapist.wait_text("#phase", "child answering", WAIT).await;
+    therapist
+        .wait_count("#results tbody tr.result", results_shown, WAIT)
+        .await;
+    therapist
+        .wait_count("#decisions tbody tr", decisions_shown, WAIT)
+        .await;
+    eprintln!(
+        "tablet_bridge SIGKILLed with task {} on the child page: both pages offline after \
+         {:.1} s, online again after {:.1} s, the task back on the child page after {:.1} s; \
+         the therapist page logged in again with {results_shown} results and \
+         {decisions_shown} decisions",
+        task.sequence_id,
+        offline_after.as_secs_f64(),
+        online_after.as_secs_f64(),
+        task_after.as_secs_f64()
+    );
+}
+
 /// Taps `emotions` on the child page (appending to what is tapped already).
 async fn tap(child: &Page, emotions: &[String]) {
     let filled = "#slots .slot[data-emotion]";
@@ -552,7 +641,7 @@ async fn refuse_bad_input(
     );
 }
 
-async fn session(shots: &Path, ears: &Ears) -> Sessions {
+async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     let base = format!("http://127.0.0.1:{HTTP_PORT}");
     // A page elsewhere cannot open the tablets' WebSocket.
     let forged = raw_http(
@@ -640,6 +729,9 @@ async fn session(shots: &Path, ears: &Ears) -> Sessions {
             therapist.click("#resume").await;
             therapist.wait_text("#phase", "child answering", WAIT).await;
             wait_for_task_on_child(&child, &task).await;
+        }
+        if k == BRIDGE_KILLED_AT {
+            bridge_killed_and_back(&child, &therapist, &task, logs, shots).await;
         }
         let tapped: Vec<String> = if k == WRONG_AT {
             // The first emotion swapped for another one: a wrong answer.
