@@ -576,26 +576,24 @@ echo "launch_exit=$?"
     );
     // Decisions are durable: the respawned recorder was sent those made while it was down, so
     // every sequence the policy set up has its decision (Q-values and all) in the bag.
-    let decided_by_policy: Vec<usize> = records
-        .iter()
-        .filter(|r| r["policy_fallback"] == false && r["result"]["overridden"] != true)
-        .filter_map(|r| r["result"]["sequence_index"].as_u64())
-        .map(|i| i as usize)
-        .collect();
-    let missing: Vec<usize> = decided_by_policy
-        .iter()
-        .copied()
-        .filter(|&i| decided[i] == 0)
-        .collect();
+    let sequences_where = |keep: &dyn Fn(&serde_json::Value) -> bool| -> Vec<usize> {
+        records
+            .iter()
+            .filter(|r| keep(r))
+            .filter_map(|r| r["result"]["sequence_index"].as_u64())
+            .map(|i| i as usize)
+            .collect()
+    };
+    let missing: Vec<usize> =
+        sequences_where(&|r| r["policy_fallback"] == false && r["result"]["overridden"] != true)
+            .into_iter()
+            .filter(|&i| decided[i] == 0)
+            .collect();
     assert!(
         missing.is_empty(),
         "no decision in the bag for sequences {missing:?} (decisions per step {decided:?})"
     );
-    let fallbacks: Vec<u64> = records
-        .iter()
-        .filter(|r| r["policy_fallback"] == true)
-        .filter_map(|r| r["result"]["sequence_index"].as_u64())
-        .collect();
+    let fallbacks = sequences_where(&|r| r["policy_fallback"] == true);
     eprintln!(
         "game_manager: SIGKILL -> bridge showed it lost {bridge_lost_s:.3} s; recovered at \
          sequence {interrupted}, resumed {:.1} s after the kill; decisions per step {:?}, \

@@ -71,6 +71,16 @@ impl HeartbeatWatch {
         }
     }
 
+    /// The same with the timeout in seconds, as parameter files give it (checked there; a
+    /// value that is no duration falls back to the suite's default, 4 s).
+    pub fn with_timeout_s(
+        names: impl IntoIterator<Item = impl Into<String>>,
+        timeout_s: f64,
+    ) -> Self {
+        let timeout = Duration::try_from_secs_f64(timeout_s).unwrap_or(Duration::from_secs(4));
+        HeartbeatWatch::new(names, timeout)
+    }
+
     /// The nodes watched, in the order given.
     pub fn names(&self) -> &[String] {
         &self.names

@@ -323,14 +323,17 @@ impl State {
     /// Returns `None` for a feedback action in the start state.
     pub fn next(self, action: Action, outcome: Outcome) -> Option<(State, Level)> {
         let (level, feedback) = action.apply(self)?;
-        Some((
-            State {
-                level: level.get(),
-                feedback,
-                previous_score: outcome.score(level),
-            },
-            level,
-        ))
+        Some((State::after(level, feedback, outcome), level))
+    }
+
+    /// The state after a sequence played at `level` with `feedback` ended in `outcome`: its
+    /// level and feedback, and PS = its score L * O.
+    pub fn after(level: Level, feedback: Feedback, outcome: Outcome) -> State {
+        State {
+            level: level.get(),
+            feedback,
+            previous_score: outcome.score(level),
+        }
     }
 }
 

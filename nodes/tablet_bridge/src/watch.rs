@@ -24,11 +24,10 @@ pub(crate) struct GameManagerWatch {
 }
 
 impl GameManagerWatch {
-    /// Lost after `timeout_s` without a heartbeat (validated; 4 s if it is not a duration).
+    /// Lost after `timeout_s` without a heartbeat.
     pub(crate) fn new(timeout_s: f64) -> Self {
-        let timeout = Duration::try_from_secs_f64(timeout_s).unwrap_or(Duration::from_secs(4));
         GameManagerWatch {
-            heartbeats: HeartbeatWatch::new([GAME_MANAGER_NODE], timeout),
+            heartbeats: HeartbeatWatch::with_timeout_s([GAME_MANAGER_NODE], timeout_s),
             notice: None,
         }
     }

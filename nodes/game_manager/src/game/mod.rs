@@ -140,7 +140,10 @@ pub struct GameManager {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
-        let watched = watch::node_watch(&params.watched_nodes, params.node_loss_timeout_s);
+        let watched = HeartbeatWatch::with_timeout_s(
+            params.watched_nodes.iter().cloned(),
+            params.node_loss_timeout_s,
+        );
         Ok(GameManager {
             utterances: Utterances::from_params(&params),
             params,

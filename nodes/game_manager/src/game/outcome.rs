@@ -120,11 +120,7 @@ impl GameManager {
             answered_ns: c.answered_ns,
             rejected_answers: c.rejected_answers,
         };
-        s.state = State {
-            level: plan.level.get(),
-            feedback: plan.feedback,
-            previous_score: scored.score,
-        };
+        s.state = State::after(plan.level, plan.feedback, scored.outcome);
         s.talk_start_ns = c.answered_ns;
         s.results.push(result.clone());
         let last = s.index >= self.params.sequences_per_session as u8;

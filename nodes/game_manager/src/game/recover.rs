@@ -34,18 +34,16 @@ impl GameManager {
         }
         let next = r.next_index();
         let last = r.records.last();
-        // The state after the last result, as scoring it made it (outcome.rs): its level and
-        // feedback, PS = its score. Validated records always give one; the start state is
-        // the safe answer anyway.
+        // The state after the last result, as scoring it made it (outcome.rs). Validated
+        // records always give one; the start state is the safe answer anyway.
         let state = last
             .and_then(|l| {
                 let res = &l.result;
-                let level = Level::new(res.level.into()).ok()?;
-                Some(State {
-                    level: level.get(),
-                    feedback: Feedback::new(res.feedback.into()).ok()?,
-                    previous_score: Outcome::new(res.outcome.into()).ok()?.score(level),
-                })
+                Some(State::after(
+                    Level::new(res.level.into()).ok()?,
+                    Feedback::new(res.feedback.into()).ok()?,
+                    Outcome::new(res.outcome.into()).ok()?,
+                ))
             })
             .unwrap_or(State::START);
         let rng = self.replayed_rng(&r);

@@ -6,18 +6,11 @@
 
 use super::GameManager;
 use crate::protocol::{LogLevel, Output};
-use node_shell::heartbeat_watch::{Heard, HeartbeatWatch};
+use node_shell::heartbeat_watch::Heard;
 use qt_therapy_msgs::Heartbeat;
-use std::time::Duration;
 
 fn seconds(ns: i64) -> f64 {
     ns as f64 * 1e-9
-}
-
-/// The watch over `watched_nodes` (the timeout is validated, 0.2 to 600 s).
-pub(super) fn node_watch(names: &[String], timeout_s: f64) -> HeartbeatWatch {
-    let timeout = Duration::try_from_secs_f64(timeout_s).unwrap_or(Duration::from_secs(4));
-    HeartbeatWatch::new(names.iter().cloned(), timeout)
 }
 
 impl GameManager {
@@ -32,32 +25,27 @@ impl GameManager {
     }
 
     pub(super) fn on_heartbeat(&mut self, hb: Heartbeat, now: i64) {
-        let old_pid = match self.watched.heartbeat(&hb.node_name, hb.pid, now) {
+        match self.watched.heartbeat(&hb.node_name, hb.pid, now) {
             Heard::Unwatched => return,
-            Heard::Alive => None,
+            Heard::Alive => {}
             Heard::WatchStarted => {
                 let names = self.watched.names().join(", ");
                 self.log(
                     LogLevel::Info,
                     format!("watching the heartbeats of {names}"),
                 );
-                None
             }
-            Heard::Restarted { old_pid } => Some(old_pid),
-            Heard::Back { lost_for_ns, .. } => {
-                self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now);
-                None
-            }
-        };
-        if let Some(old_pid) = old_pid {
             // Back within the timeout: it was never lost, but its state is new.
-            self.log(
+            Heard::Restarted { old_pid } => self.log(
                 LogLevel::Warn,
                 format!(
                     "node {} restarted (pid {old_pid} -> {}) within the loss timeout",
                     hb.node_name, hb.pid
                 ),
-            );
+            ),
+            Heard::Back { lost_for_ns, .. } => {
+                self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now)
+            }
         }
         self.arm_watchdog();
     }
