@@ -134,6 +134,9 @@ pub const PREDICT_USER: Service<PredictUser> = Service::new("/qt_therapy/user_mo
 pub const ASSIGN_CLUSTER: Service<AssignCluster> =
     Service::new("/qt_therapy/user_model/assign_cluster");
 pub const DECIDE_ACTION: Service<DecideAction> = Service::new("/qt_therapy/policy/decide_action");
+/// The node serving [`DECIDE_ACTION`], by the name its heartbeat carries: the game manager
+/// tells a dead policy from a slow one by it.
+pub const BEHAVIOUR_POLICY_NODE: &str = "behaviour_policy";
 
 /// Every topic of the suite, for the recorder (`bag record --all`) and the docs.
 pub fn all_topics() -> Vec<TopicInfo> {

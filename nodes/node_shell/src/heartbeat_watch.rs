@@ -167,6 +167,14 @@ impl HeartbeatWatch {
     pub fn is_lost(&self, name: &str) -> bool {
         self.nodes.get(name).is_some_and(|w| w.lost_since.is_some())
     }
+
+    /// How long `name` has been silent at `now_ns`: since its last heartbeat, or since the
+    /// watch started if never heard. None if it is not watched or nothing is watched yet.
+    pub fn silent_ns(&self, name: &str, now_ns: i64) -> Option<i64> {
+        self.nodes
+            .get(name)
+            .map(|w| now_ns.saturating_sub(w.last_ns))
+    }
 }
 
 #[cfg(test)]
@@ -244,5 +252,20 @@ mod tests {
         );
         assert_eq!(w.heartbeat("policy", 11, 4 * S), Heard::Alive);
         assert!(w.lost().is_empty());
+    }
+
+    #[test]
+    fn silence_is_measured_from_the_last_heartbeat_or_the_watch_start() {
+        let mut w = watch();
+        assert_eq!(w.silent_ns("policy", S), None, "nothing watched yet");
+        w.heartbeat("classifier", 20, 2 * S);
+        assert_eq!(
+            w.silent_ns("policy", 3 * S),
+            Some(S),
+            "never heard: since the start"
+        );
+        w.heartbeat("policy", 10, 3 * S);
+        assert_eq!(w.silent_ns("policy", 3 * S + S / 2), Some(S / 2));
+        assert_eq!(w.silent_ns("recorder", 3 * S), None, "not watched");
     }
 }

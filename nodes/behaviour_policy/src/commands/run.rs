@@ -10,7 +10,7 @@ use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
 use behaviour_policy::{BehaviourPolicyParams, ClusterPolicies, Learning, Mode, QTable};
 use node_shell::{NodeShell, ShellOptions, header_now};
 use qt_therapy_msgs::DecideActionResponse;
-use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
+use qt_therapy_msgs::topics::{BEHAVIOUR_POLICY_NODE, DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
 use sequence_game::UserModelTable;
 use std::path::Path;
 
@@ -54,7 +54,7 @@ fn pretrain(
 
 pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
     let (mut shell, params): (NodeShell, BehaviourPolicyParams) =
-        NodeShell::start("behaviour_policy", &options)?;
+        NodeShell::start(BEHAVIOUR_POLICY_NODE, &options)?;
     let learning = params.learning()?;
     let set =
         user_model::UserModelSet::load(Path::new(&params.user_model_file)).with_context(|| {

@@ -2,11 +2,16 @@
 //! decision if it comes in time and fits the state, else the safe fallback (same level, no
 //! feedback; level 1 on the first sequence).
 
-use super::{GameManager, Phase, Plan, Timer};
+use super::{GameManager, Phase, Plan, PolicySilence, Timer};
 use crate::live_line::decision_reason;
 use crate::protocol::{LogLevel, Output};
+use qt_therapy_msgs::topics::BEHAVIOUR_POLICY_NODE;
 use qt_therapy_msgs::{BehaviourState, DecideActionRequest, DecideActionResponse, Validate};
 use sequence_game::{Action, Feedback, Level};
+
+/// A silence in the policy's heartbeat (10 Hz) that says it may be dead rather than slow:
+/// five heartbeats missed.
+const POLICY_SILENT_NS: i64 = 500_000_000;
 
 impl GameManager {
     /// Asks the policy for the current sequence's action, unless the therapist already chose.
@@ -17,6 +22,9 @@ impl GameManager {
         let Some(s) = self.session.as_ref() else {
             return;
         };
+        if self.current.policy_silence == PolicySilence::Waiting {
+            self.current.policy_silence = PolicySilence::Waited;
+        }
         let request_id = self.next_request_id;
         self.next_request_id += 1;
         let request = DecideActionRequest {
@@ -123,6 +131,62 @@ impl GameManager {
             fallback: false,
             reason: decision_reason(d),
         })
+    }
+
+    /// At the policy's deadline, with the session going on: if the policy's heartbeat is
+    /// silent too, as it is for a process that died shortly before or after the request and
+    /// that the watch cannot call lost yet, waits for its next heartbeat (then asks it again)
+    /// or for its loss (then the session is held) rather than playing the fallback. Its
+    /// answer to the request still counts if it comes meanwhile. True if it waits.
+    pub(super) fn wait_for_silent_policy(&mut self, now: i64) -> bool {
+        if self.current.policy_silence != PolicySilence::NotWaited {
+            return false;
+        }
+        let Some(silent_ns) = self.watched.silent_ns(BEHAVIOUR_POLICY_NODE, now) else {
+            return false;
+        };
+        if silent_ns < POLICY_SILENT_NS {
+            return false;
+        }
+        self.current.policy_silence = PolicySilence::Waiting;
+        let index = self.session.as_ref().map_or(0, |s| s.index);
+        let silent_s = silent_ns as f64 * 1e-9;
+        self.log(
+            LogLevel::Warn,
+            format!(
+                "sequence {index}: the policy did not answer within {} s and has sent no \
+                 heartbeat for {silent_s:.1} s: waiting for its next heartbeat (it is then \
+                 asked again) or its loss (the session is then held) rather than playing the \
+                 fallback",
+                self.params.policy_deadline_s
+            ),
+        );
+        self.status =
+            format!("sequence {index}: waiting for the behaviour policy (silent {silent_s:.1} s)");
+        self.publish_state(now);
+        true
+    }
+
+    /// A heartbeat of the policy: asks it again if the current sequence waits for it.
+    pub(super) fn on_policy_heard(&mut self, now: i64) {
+        if self.current.policy_silence != PolicySilence::Waiting
+            || self.paused()
+            || self.phase != Phase::Deciding
+            || self.current.plan.is_some()
+        {
+            return;
+        }
+        // The request went to a process that may be gone: a new one, and the old one's
+        // answer, if any, is superseded.
+        let old = self.current.request_id.take();
+        self.log(
+            LogLevel::Info,
+            format!(
+                "the policy is heard again: asking it again (request {} unanswered)",
+                old.map_or_else(|| "none".to_string(), |id| id.to_string())
+            ),
+        );
+        self.request_decision(now);
     }
 
     /// Same level, no feedback (level 1 on the first sequence).

@@ -66,10 +66,23 @@ struct Plan {
     reason: String,
 }
 
+/// Whether the current sequence waited for a silent policy.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+enum PolicySilence {
+    #[default]
+    NotWaited,
+    Waiting,
+    Waited,
+}
+
 /// The sequence being set up or played.
 #[derive(Debug, Clone, Default)]
 struct Current {
     request_id: Option<u64>,
+    /// The policy's deadline ran out while its heartbeat was silent: its next heartbeat asks
+    /// it again (its loss holds the session instead). Once a sequence, so a policy that
+    /// keeps missing deadlines cannot postpone the fallback for ever.
+    policy_silence: PolicySilence,
     plan: Option<Plan>,
     speech_done: bool,
     feedback_line: Option<usize>,

@@ -130,8 +130,11 @@ impl GameManager {
         match timer {
             Timer::PolicyDeadline { request_id } => {
                 if self.phase == Phase::Deciding && self.current.request_id == Some(request_id) {
-                    self.current.request_id = None;
                     let s = self.params.policy_deadline_s;
+                    if !self.paused() && self.wait_for_silent_policy(now) {
+                        return;
+                    }
+                    self.current.request_id = None;
                     if self.paused() {
                         // Nothing plays while held (a lost policy is the likely cause) or
                         // paused, so waiting costs the child nothing: the policy is asked

@@ -8,6 +8,7 @@ use super::GameManager;
 use crate::protocol::{LogLevel, Output};
 use node_shell::heartbeat_watch::Heard;
 use qt_therapy_msgs::Heartbeat;
+use qt_therapy_msgs::topics::BEHAVIOUR_POLICY_NODE;
 
 fn seconds(ns: i64) -> f64 {
     ns as f64 * 1e-9
@@ -46,6 +47,9 @@ impl GameManager {
             Heard::Back { lost_for_ns, .. } => {
                 self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now)
             }
+        }
+        if hb.node_name == BEHAVIOUR_POLICY_NODE {
+            self.on_policy_heard(now);
         }
         self.arm_watchdog();
     }

@@ -279,16 +279,18 @@ fn decide_time(step: u8) -> i64 {
         .expect("a request for the step")
 }
 
-/// The policy (silent to its first request for sequence 2, as a dead process is) stops its
-/// heartbeats `dies_before_s` before that request and is back `back_after_s` after it. Runs
-/// the session; returns it with the times of the requests for sequence 2.
-fn policy_dies_around_step_2(dies_before_s: f64, back_after_s: f64) -> (Harness, Vec<i64>) {
+/// The policy's heartbeats around sequence 2, in seconds from its first request for that
+/// sequence: pid 20 from the start until `beats[0].0`, then each `(from, to)` of `beats[1..]`
+/// as pid 21 (the last running to the end). Its first `silent` requests for sequence 2 get no
+/// answer, as a dead process gives none. Runs the session; returns it with the times of the
+/// requests for sequence 2 from the first.
+fn policy_around_step_2(silent: usize, beats: &[(f64, f64)]) -> (Harness, Vec<i64>) {
     let t2 = decide_time(2);
     let mut asked = 0;
     let policy: Box<dyn FnMut(&DecideActionRequest) -> PolicyReply> = Box::new(move |req| {
         if req.step == 2 {
             asked += 1;
-            if asked == 1 {
+            if asked <= silent {
                 return PolicyReply::Silent;
             }
         }
@@ -299,8 +301,15 @@ fn policy_dies_around_step_2(dies_before_s: f64, back_after_s: f64) -> (Harness,
     });
     let mut h = Harness::new(params(true), policy, scripted_child(vec![]));
     h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
-    h.heartbeats(POLICY, 20, T0, t2 - ns(dies_before_s));
-    h.heartbeats(POLICY, 21, t2 + ns(back_after_s), T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, t2 + ns(beats[0].0));
+    for (i, &(from, to)) in beats.iter().enumerate().skip(1) {
+        let to = if i + 1 == beats.len() {
+            T0 + 400 * S
+        } else {
+            t2 + ns(to)
+        };
+        h.heartbeats(POLICY, 21, t2 + ns(from), to);
+    }
     h.start("s");
     h.run_until(T0 + 400 * S);
     let requests = h
@@ -312,6 +321,23 @@ fn policy_dies_around_step_2(dies_before_s: f64, back_after_s: f64) -> (Harness,
         })
         .collect();
     (h, requests)
+}
+
+/// The policy process dies `dies_before_s` before the first request for sequence 2 (which
+/// it never answers) and is back `back_after_s` after it.
+fn policy_dies_around_step_2(dies_before_s: f64, back_after_s: f64) -> (Harness, Vec<i64>) {
+    policy_around_step_2(1, &[(-dies_before_s, 0.0), (back_after_s, f64::INFINITY)])
+}
+
+/// Sequence 2's record, with how many fallbacks the session summary counts.
+fn step_2_fallback(h: &Harness) -> (bool, u32) {
+    let records = h.records();
+    assert_eq!(records.len(), 10, "every sequence recorded once");
+    let fallback = records
+        .iter()
+        .find(|r| r.result.sequence_index == 2)
+        .map(|r| r.policy_fallback);
+    (fallback == Some(true), h.summaries()[0].policy_fallbacks)
 }
 
 #[test]
@@ -343,4 +369,53 @@ fn a_request_still_pending_when_the_policy_is_back_is_asked_again() {
     assert_eq!(requests, vec![0, ns(1.5)]);
     assert!(h.records().iter().all(|r| !r.policy_fallback));
     assert_eq!(h.results().len(), 10);
+}
+
+#[test]
+fn a_policy_silent_at_its_deadline_is_waited_for_until_it_is_lost_and_back() {
+    // Dead 1 s before the request (last heartbeat 1.1 s before): at the deadline (+2 s) its
+    // heartbeat has been silent 3.1 s, short of the loss timeout (4 s). Waiting, lost at
+    // +2.9 s, held, back at +10 s and asked again then: no fallback.
+    let (h, requests) = policy_dies_around_step_2(1.0, 10.0);
+    assert_eq!(requests, vec![0, 10 * S]);
+    assert!(
+        h.warnings()
+            .iter()
+            .any(|w| w.contains("no heartbeat for 3.1 s: waiting")),
+        "{:?}",
+        h.warnings()
+    );
+    assert_eq!(step_2_fallback(&h), (false, 0));
+}
+
+#[test]
+fn a_policy_dying_just_after_the_request_is_waited_for_too() {
+    // Dies 1 s after the request: silent 1 s at the deadline; back (a new pid, never lost)
+    // at +2.5 s and asked again at once.
+    let (h, requests) = policy_around_step_2(1, &[(1.0, 0.0), (2.5, f64::INFINITY)]);
+    assert_eq!(requests, vec![0, ns(2.5)]);
+    assert_eq!(step_2_fallback(&h), (false, 0));
+}
+
+#[test]
+fn a_policy_that_beats_but_does_not_answer_gets_the_fallback_at_its_deadline() {
+    // Alive (a restart within the timeout, heartbeats throughout) but silent: slow, not dead.
+    let (h, requests) = policy_around_step_2(1, &[(3.0, 0.0), (3.0, f64::INFINITY)]);
+    assert_eq!(requests, vec![0]);
+    assert_eq!(step_2_fallback(&h), (true, 1));
+    assert!(
+        h.warnings().iter().all(|w| !w.contains("waiting")),
+        "{:?}",
+        h.warnings()
+    );
+}
+
+#[test]
+fn a_policy_is_waited_for_once_a_sequence() {
+    // Silent at the first deadline (+2 s) and back at +2.5 s; asked again, silent again, and
+    // its heartbeat is silent again at the second deadline (+4.5 s): the fallback, not a
+    // second wait.
+    let (h, requests) = policy_around_step_2(2, &[(1.0, 0.0), (2.5, 3.5), (5.0, f64::INFINITY)]);
+    assert_eq!(requests, vec![0, ns(2.5)]);
+    assert_eq!(step_2_fallback(&h), (true, 1));
 }
