@@ -1,6 +1,10 @@
 //! The decision node's Q-tables, one per user-model cluster, sans-IO: a cluster whose file
 //! cannot be used (corrupt, truncated, another owner's) is unavailable, its decisions refused
 //! and its results not learned, naming the file, which is never written; the others serve.
+//! Optionally (`per_user_q_tables`) each user also gets a table of their own, started from
+//! their cluster's at their first decision (the paper's policy transfer, to one user), which
+//! decides for them and learns from their sessions; the cluster's table still learns from all
+//! of its users, so a new user starts from the group's experience.
 
 use crate::learning::{Learning, Mode, QTable};
 use crate::messages::{ResultError, decision_message, transition};
@@ -9,6 +13,7 @@ use crate::policy_core::{PolicyError, Update};
 use crate::q_table_file::QTableOwner;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{DecideActionRequest, SequenceResult};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// Why a request or a result of the node was refused; no table or file was changed.
@@ -26,6 +31,12 @@ pub enum ServeError {
     },
     #[error("state: {0}")]
     State(String),
+    #[error("user {user}'s Q-table is unavailable and left untouched: {reason}")]
+    UserUnavailable {
+        user: String,
+        path: PathBuf,
+        reason: String,
+    },
     #[error(transparent)]
     Policy(#[from] PolicyError),
     #[error(transparent)]
@@ -34,23 +45,70 @@ pub enum ServeError {
     Persistent(#[from] PersistentError),
 }
 
-/// One cluster's table: in use, or refused when the node started.
+/// One owner's table (a cluster's or a user's): in use, or refused when it was opened.
 #[derive(Debug)]
-pub enum ClusterTable {
+pub enum OwnedTable {
     // Boxed: a table is 3 kB, a refusal a few words.
     Ready(Box<PersistentPolicy>),
-    /// `reason` names the file (`PersistentError` always does for a cluster's table).
+    /// `reason` names the file (`PersistentError` always does for a table's file).
     Unavailable {
         path: PathBuf,
         reason: String,
     },
 }
 
+impl OwnedTable {
+    /// Opens `owner`'s table in `dir`, or makes it with `initial`; a table that cannot be
+    /// opened is logged as an error with its file and the problem, and is unavailable.
+    fn open(
+        dir: &Path,
+        owner: QTableOwner,
+        learning: Learning,
+        mode: Mode,
+        seed: u64,
+        initial: impl FnOnce() -> Result<(QTable, String), String>,
+    ) -> OwnedTable {
+        match PersistentPolicy::open(dir, owner.clone(), learning, mode, seed, initial) {
+            Ok((p, how)) => {
+                let how = match how {
+                    Opened::Loaded => "loaded",
+                    Opened::Created => "created",
+                };
+                tracing::info!(%owner, file = %p.path().display(), how,
+                    updates = p.core().updates(), "Q-table ready");
+                OwnedTable::Ready(Box::new(p))
+            }
+            Err(e) => {
+                let path = owner
+                    .file_name()
+                    .map(|f| dir.join(f))
+                    .unwrap_or_else(|_| dir.to_path_buf());
+                tracing::error!(%owner, file = %path.display(),
+                    "Q-table refused: {e}. Until the file is repaired or removed and the node \
+                     restarted, {owner}'s decisions are refused and its results not learned in \
+                     it; the file is left untouched");
+                OwnedTable::Unavailable {
+                    path,
+                    reason: e.to_string(),
+                }
+            }
+        }
+    }
+}
+
 /// Every cluster's table, and the cluster used when a request names none (-1).
 #[derive(Debug)]
 pub struct ClusterPolicies {
-    tables: Vec<ClusterTable>,
+    tables: Vec<OwnedTable>,
     default_cluster: i64,
+    dir: PathBuf,
+    learning: Learning,
+    mode: Mode,
+    seed: u64,
+    /// Per-user tables, opened at each user's first decision or result; None: clusters only.
+    users: Option<BTreeMap<String, OwnedTable>>,
+    /// User ids that cannot name a file: served by their cluster's table (warned once each).
+    unnamed_users: BTreeSet<String>,
 }
 
 impl ClusterPolicies {
@@ -68,51 +126,44 @@ impl ClusterPolicies {
     ) -> ClusterPolicies {
         let tables = (0..clusters)
             .map(|k| {
-                let owner = QTableOwner::Cluster(k);
-                let opened = PersistentPolicy::open(
+                OwnedTable::open(
                     dir,
-                    owner.clone(),
+                    QTableOwner::Cluster(k),
                     learning,
                     mode,
                     seed ^ k as u64,
                     || initial(k),
-                );
-                match opened {
-                    Ok((p, how)) => {
-                        let how = match how {
-                            Opened::Loaded => "loaded",
-                            Opened::Created => "created",
-                        };
-                        tracing::info!(cluster = k, file = %p.path().display(), how,
-                            updates = p.core().updates(), "Q-table ready");
-                        ClusterTable::Ready(Box::new(p))
-                    }
-                    Err(e) => {
-                        let path = owner
-                            .file_name()
-                            .map(|f| dir.join(f))
-                            .unwrap_or_else(|_| dir.to_path_buf());
-                        tracing::error!(cluster = k, file = %path.display(),
-                            "Q-table refused: {e}. Cluster {k} is unavailable (its decisions \
-                             are refused and its results not learned) until the file is \
-                             repaired or removed and the node restarted; the file is left \
-                             untouched");
-                        ClusterTable::Unavailable {
-                            path,
-                            reason: e.to_string(),
-                        }
-                    }
-                }
+                )
             })
             .collect();
         ClusterPolicies {
             tables,
             default_cluster,
+            dir: dir.to_path_buf(),
+            learning,
+            mode,
+            seed,
+            users: None,
+            unnamed_users: BTreeSet::new(),
         }
     }
 
-    pub fn tables(&self) -> &[ClusterTable] {
+    /// Gives every user a table of their own (`dir/user_<id>.json`), started from their
+    /// cluster's table at their first decision; false keeps one table per cluster.
+    pub fn with_user_tables(mut self, on: bool) -> Self {
+        self.users = on.then(BTreeMap::new);
+        self
+    }
+
+    pub fn tables(&self) -> &[OwnedTable] {
         &self.tables
+    }
+
+    /// The per-user tables opened so far, by user id (empty without per-user tables).
+    pub fn user_tables(&self) -> impl Iterator<Item = (&str, &OwnedTable)> {
+        self.users
+            .iter()
+            .flat_map(|m| m.iter().map(|(id, t)| (id.as_str(), t)))
     }
 
     /// The cluster a message names; -1 (or any negative) means the default one.
@@ -131,15 +182,68 @@ impl ClusterPolicies {
             })
     }
 
-    fn ready(&mut self, requested: i32) -> Result<&mut PersistentPolicy, ServeError> {
-        let k = self.cluster(requested)?;
-        match &mut self.tables[k] {
-            ClusterTable::Ready(p) => Ok(p),
-            ClusterTable::Unavailable { path, reason } => Err(ServeError::Unavailable {
-                cluster: k,
-                path: path.clone(),
-                reason: reason.clone(),
-            }),
+    fn ready(&mut self, k: usize) -> Result<&mut PersistentPolicy, ServeError> {
+        ready(&mut self.tables[k]).map_err(|(path, reason)| ServeError::Unavailable {
+            cluster: k,
+            path,
+            reason,
+        })
+    }
+
+    /// The table that decides for `user_id` in cluster `k`: the user's own with per-user
+    /// tables (opened, or made from the cluster's table, on first use), else the cluster's.
+    fn policy_for(&mut self, user_id: &str, k: usize) -> Result<&mut PersistentPolicy, ServeError> {
+        if !self.user_table_for(user_id) {
+            return self.ready(k);
+        }
+        // A user with no table yet whose cluster is unavailable has nothing to start from:
+        // the cluster's refusal, and no entry, so a later request with a usable cluster
+        // makes their table.
+        let owner = QTableOwner::User(user_id.to_string());
+        let on_disk = owner.file_name().is_ok_and(|f| self.dir.join(f).exists());
+        let unopened = self
+            .users
+            .as_ref()
+            .is_some_and(|u| !u.contains_key(user_id));
+        if unopened && !on_disk && ready(&mut self.tables[k]).is_err() {
+            return self.ready(k);
+        }
+        let users = match self.users {
+            Some(ref mut users) => users,
+            None => return self.ready(k),
+        };
+        let table = users.entry(user_id.to_string()).or_insert_with(|| {
+            open_user_table(
+                &self.dir,
+                user_id,
+                &self.tables[k],
+                k,
+                self.learning,
+                self.mode,
+                self.seed,
+            )
+        });
+        ready(table).map_err(|(path, reason)| ServeError::UserUnavailable {
+            user: user_id.to_string(),
+            path,
+            reason,
+        })
+    }
+
+    /// Whether `user_id` gets a table of their own: per-user tables are on, and the id can
+    /// name a file (a warning, once, for one that cannot: its cluster's table serves it).
+    fn user_table_for(&mut self, user_id: &str) -> bool {
+        if self.users.is_none() || user_id.is_empty() {
+            return false;
+        }
+        match QTableOwner::User(user_id.to_string()).file_name() {
+            Ok(_) => true,
+            Err(e) => {
+                if self.unnamed_users.insert(user_id.to_string()) {
+                    tracing::warn!("{e}: the user's cluster's Q-table serves them");
+                }
+                false
+            }
         }
     }
 
@@ -149,7 +253,8 @@ impl ClusterPolicies {
         request: &DecideActionRequest,
         header: Header,
     ) -> Result<qt_therapy_msgs::Decision, ServeError> {
-        let policy = self.ready(request.user_model_cluster)?;
+        let k = self.cluster(request.user_model_cluster)?;
+        let policy = self.policy_for(&request.user_id, k)?;
         let state = request
             .state
             .to_state()
@@ -163,13 +268,77 @@ impl ClusterPolicies {
         ))
     }
 
-    /// Learns from one result and saves its cluster's table; None when that sequence was
-    /// already learned (sent again after a restart).
+    /// Learns from one result and saves its cluster's table, and with per-user tables the
+    /// user's too; None when that sequence was already learned (sent again after a restart).
+    /// With per-user tables the user's update is the one returned; an error of either table is
+    /// returned after both have tried.
     pub fn learn(&mut self, result: &SequenceResult) -> Result<Option<Update>, ServeError> {
-        let policy = self.ready(result.user_model_cluster)?;
+        let k = self.cluster(result.user_model_cluster)?;
         let t = transition(result)?;
-        Ok(policy.learn_sequence(&result.session_id, result.sequence_index, &t)?)
+        let (session, index) = (&result.session_id, result.sequence_index);
+        let cluster = self
+            .ready(k)
+            .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
+        if !self.user_table_for(&result.user_id) {
+            return cluster;
+        }
+        let user = self
+            .policy_for(&result.user_id, k)
+            .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
+        match (cluster, user) {
+            (Err(e), _) => Err(e),
+            (Ok(_), user) => user,
+        }
     }
+}
+
+/// The policy of a table in use, or where and why it was refused.
+fn ready(table: &mut OwnedTable) -> Result<&mut PersistentPolicy, (PathBuf, String)> {
+    match table {
+        OwnedTable::Ready(p) => Ok(p),
+        OwnedTable::Unavailable { path, reason } => Err((path.clone(), reason.clone())),
+    }
+}
+
+/// Opens `dir/user_<id>.json`, or makes it from cluster `k`'s table as it stands now. A user's
+/// file that cannot be used makes that user unavailable (logged with the file), not the node.
+fn open_user_table(
+    dir: &Path,
+    user_id: &str,
+    cluster: &OwnedTable,
+    k: usize,
+    learning: Learning,
+    mode: Mode,
+    seed: u64,
+) -> OwnedTable {
+    OwnedTable::open(
+        dir,
+        QTableOwner::User(user_id.to_string()),
+        learning,
+        mode,
+        seed ^ user_seed(user_id),
+        || match cluster {
+            OwnedTable::Ready(p) => Ok((
+                p.core().q_table().clone(),
+                format!(
+                    "user {user_id}'s own table, started from cluster {k}'s ({}, {} updates)",
+                    p.path().display(),
+                    p.core().updates()
+                ),
+            )),
+            OwnedTable::Unavailable { reason, .. } => Err(format!(
+                "cluster {k}'s table, to start from, is refused: {reason}"
+            )),
+        },
+    )
+}
+
+/// A user's seed offset: FNV-1a of the id, so it is the same in every process and release
+/// (std's hasher is randomly seeded).
+fn user_seed(user_id: &str) -> u64 {
+    user_id.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }
 
 /// Which Q-table made a decision, for the Decision message (the replay reads it back).
@@ -230,11 +399,11 @@ mod tests {
         let corrupt = dir.path().join("cluster_1.json");
         std::fs::write(&corrupt, CORRUPT).expect("write");
         let mut policies = open(dir.path());
-        assert!(matches!(policies.tables()[0], ClusterTable::Ready(_)));
+        assert!(matches!(policies.tables()[0], OwnedTable::Ready(_)));
         assert!(
-            matches!(&policies.tables()[1], ClusterTable::Unavailable { path, .. } if *path == corrupt)
+            matches!(&policies.tables()[1], OwnedTable::Unavailable { path, .. } if *path == corrupt)
         );
-        assert!(matches!(policies.tables()[2], ClusterTable::Ready(_)));
+        assert!(matches!(policies.tables()[2], OwnedTable::Ready(_)));
 
         let e = policies
             .decide(&request(1), Header::default())
@@ -328,5 +497,175 @@ mod tests {
         assert!(e.to_string().contains("pretraining failed"), "{e}");
         assert!(!dir.path().join("cluster_1.json").exists());
         assert!(policies.decide(&request(0), Header::default()).is_ok());
+    }
+
+    fn for_user(user: &str, session: &str) -> (DecideActionRequest, SequenceResult) {
+        (
+            DecideActionRequest {
+                user_id: user.into(),
+                session_id: session.into(),
+                ..request(0)
+            },
+            SequenceResult {
+                user_id: user.into(),
+                session_id: session.into(),
+                ..result(0)
+            },
+        )
+    }
+
+    fn on_disk(dir: &Path, file: &str) -> QTableFile {
+        QTableFile::load(&dir.join(file)).expect("loads")
+    }
+
+    #[test]
+    fn per_user_tables_start_from_their_cluster_and_learn_only_their_users_sessions() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut policies = open(d).with_user_tables(true);
+        let (ask_1, result_1) = for_user("u1", "s1");
+        let decision = policies.decide(&ask_1, Header::default()).expect("decides");
+        assert!(
+            decision.model_used.starts_with("user u1 (")
+                && decision.model_used.contains("user_u1.json"),
+            "{}",
+            decision.model_used
+        );
+        let u1 = on_disk(d, "user_u1.json");
+        assert_eq!(u1.owner, QTableOwner::User("u1".into()));
+        assert_eq!(
+            u1.table,
+            on_disk(d, "cluster_0.json").table,
+            "a copy of its cluster's"
+        );
+        assert!(
+            u1.provenance.contains("started from cluster 0's"),
+            "{}",
+            u1.provenance
+        );
+
+        assert!(policies.learn(&result_1).expect("learns").is_some());
+        assert_eq!(on_disk(d, "user_u1.json").updates, 1);
+        assert_eq!(
+            on_disk(d, "cluster_0.json").updates,
+            1,
+            "the cluster learns from all"
+        );
+
+        // A second user starts from the cluster as it is now (after u1's sequence).
+        let (ask_2, result_2) = for_user("u2", "s2");
+        policies.decide(&ask_2, Header::default()).expect("decides");
+        assert_eq!(
+            on_disk(d, "user_u2.json").table,
+            on_disk(d, "cluster_0.json").table
+        );
+        assert_ne!(on_disk(d, "user_u2.json").table, QTable::default());
+        policies.learn(&result_2).expect("learns");
+        assert_eq!(on_disk(d, "user_u2.json").updates, 1);
+        assert_eq!(
+            on_disk(d, "user_u1.json").updates,
+            1,
+            "only its user's sessions"
+        );
+        assert_eq!(on_disk(d, "cluster_0.json").updates, 2);
+        let names: Vec<&str> = policies.user_tables().map(|(id, _)| id).collect();
+        assert_eq!(names, ["u1", "u2"]);
+
+        // A respawned node loads the user's table and learns a result sent again only once.
+        let mut respawned = open(d).with_user_tables(true);
+        assert_eq!(respawned.learn(&result_1).expect("no error"), None);
+        assert_eq!(on_disk(d, "user_u1.json").updates, 1);
+        assert_eq!(on_disk(d, "cluster_0.json").updates, 2);
+        let again = respawned
+            .decide(&ask_1, Header::default())
+            .expect("decides");
+        assert!(
+            again.model_used.ends_with("user_u1.json, 1 updates)"),
+            "{}",
+            again.model_used
+        );
+
+        // Off (the default), users share their cluster's table and no user file is made.
+        let (ask_3, _) = for_user("u3", "s3");
+        let shared = open(d).decide(&ask_3, Header::default()).expect("decides");
+        assert!(
+            shared.model_used.starts_with("cluster 0 ("),
+            "{}",
+            shared.model_used
+        );
+        assert!(!d.join("user_u3.json").exists());
+    }
+
+    #[test]
+    fn a_user_id_that_cannot_name_a_file_is_served_by_its_cluster_and_a_corrupt_user_file_by_nobody()
+     {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let corrupt = d.join("user_u9.json");
+        std::fs::write(&corrupt, CORRUPT).expect("write");
+        std::fs::write(d.join("cluster_1.json"), CORRUPT).expect("write");
+        let mut policies = open(d).with_user_tables(true);
+
+        let (ask, result) = for_user("../a b", "s1");
+        let decision = policies.decide(&ask, Header::default()).expect("decides");
+        assert!(
+            decision.model_used.starts_with("cluster 0 ("),
+            "{}",
+            decision.model_used
+        );
+        assert!(policies.learn(&result).expect("learns").is_some());
+        assert_eq!(
+            std::fs::read_dir(d).expect("lists").count(),
+            4,
+            "3 clusters, u9's"
+        );
+
+        // No table yet, and its cluster is refused: the cluster's refusal, nothing made, and
+        // a later request with a usable cluster makes the user's table.
+        let e = policies
+            .decide(
+                &DecideActionRequest {
+                    user_model_cluster: 1,
+                    ..for_user("u5", "s3").0
+                },
+                Header::default(),
+            )
+            .expect_err("unavailable");
+        assert!(
+            matches!(e, ServeError::Unavailable { cluster: 1, .. }),
+            "{e}"
+        );
+        policies
+            .decide(&for_user("u5", "s3").0, Header::default())
+            .expect("decides");
+        assert!(d.join("user_u5.json").exists());
+
+        let (ask, result) = for_user("u9", "s2");
+        let e = policies
+            .decide(&ask, Header::default())
+            .expect_err("refused");
+        let text = e.to_string();
+        assert!(
+            text.starts_with("user u9's Q-table is unavailable")
+                && text.contains(&corrupt.display().to_string()),
+            "{text}"
+        );
+        assert!(matches!(
+            policies.learn(&result),
+            Err(ServeError::UserUnavailable { .. })
+        ));
+        assert_eq!(
+            on_disk(d, "cluster_0.json").updates,
+            2,
+            "its cluster still learns"
+        );
+        assert_eq!(std::fs::read_to_string(&corrupt).expect("read"), CORRUPT);
+    }
+
+    #[test]
+    fn user_seeds_are_fixed_numbers() {
+        // FNV-1a's published test vectors: the same in every process, unlike std's hasher.
+        assert_eq!(user_seed(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(user_seed("a"), 0xaf63_dc4c_8601_ec8c);
     }
 }

@@ -20,7 +20,7 @@ pub mod report;
 pub mod simulation;
 pub mod softmax_cache;
 
-pub use cluster_policies::{ClusterPolicies, ClusterTable, ServeError};
+pub use cluster_policies::{ClusterPolicies, OwnedTable, ServeError};
 pub use learning::{Learning, Mode, QTable, Reward, TemperatureSchedule};
 pub use params::BehaviourPolicyParams;
 pub use persistent::{PersistentError, PersistentPolicy};

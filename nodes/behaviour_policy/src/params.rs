@@ -9,6 +9,7 @@ use crate::learning::{Learning, Mode, Reward, TemperatureSchedule};
 pub struct BehaviourPolicyParams {
     pub user_model_file: String,
     pub q_table_dir: String,
+    pub per_user_q_tables: bool,
     pub pretrain_epochs: i64,
     pub pretrain_runs: i64,
     pub pretrain_state_lags_result: bool,
@@ -31,6 +32,7 @@ impl Default for BehaviourPolicyParams {
         BehaviourPolicyParams {
             user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
             q_table_dir: "out/q_tables".into(),
+            per_user_q_tables: false,
             pretrain_epochs: 100,
             pretrain_runs: 5,
             pretrain_state_lags_result: false,

@@ -38,6 +38,25 @@ fn the_node_refuses_bad_input_over_dds_and_keeps_serving() {
     );
 }
 
+#[test]
+fn with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds() {
+    let Some(stdout) = loopback_netns::test_inside_namespace(
+        "with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds",
+        IN_NAMESPACE,
+        Duration::from_secs(120),
+        per_user_inside_the_namespace,
+    ) else {
+        return;
+    };
+    assert!(
+        stdout.contains(
+            "over DDS, per user: user_u1.json made from cluster 0's table at u1's first \
+             decision, both learned the result once"
+        ),
+        "{stdout}"
+    );
+}
+
 /// The node process; killed if the test ends early, so no node outlives a failed run.
 struct NodeProcess(Child);
 
@@ -140,12 +159,55 @@ fn request(cluster: i32, step: u8, state: BehaviourState) -> DecideActionRequest
     }
 }
 
-fn bad_input_inside_the_namespace() {
-    use node_shell::{NoParameters, NodeShell, ShellOptions};
-    use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
-
+/// Starts `behaviour_policy run` with its Q-tables in `q_tables` (and `extra` lines of
+/// parameters); returns it, the probe node's parameter file and the node's log file.
+fn start_node(dir: &Path, q_tables: &Path, extra: &str) -> (NodeProcess, PathBuf, PathBuf) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let user_models = root.join("nodes/user_model/models/migrave_study_c2.json");
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let node_params = dir.join("behaviour_policy.yaml");
+    std::fs::write(
+        &node_params,
+        format!(
+            "behaviour_policy:\n  ros__parameters:\n    user_model_file: {:?}\n    \
+             q_table_dir: {:?}\n{extra}",
+            path(&user_models),
+            path(q_tables)
+        ),
+    )
+    .expect("writes");
+    let probe_params = dir.join("probe.yaml");
+    std::fs::write(
+        &probe_params,
+        "behaviour_policy_probe:\n  ros__parameters: {}\n",
+    )
+    .expect("writes");
+    let log = dir.join("node.log");
+    let node = NodeProcess(
+        Command::new(env!("CARGO_BIN_EXE_behaviour_policy"))
+            .args(["run", "--params-file", &path(&node_params)])
+            .stdout(std::fs::File::create(dir.join("node.out")).expect("log"))
+            .stderr(std::fs::File::create(&log).expect("log"))
+            .spawn()
+            .expect("starts behaviour_policy run"),
+    );
+    (node, probe_params, log)
+}
+
+/// A probe node's options.
+fn probe_options(probe_params: &Path) -> node_shell::ShellOptions {
+    node_shell::ShellOptions {
+        params_file: Some(probe_params.to_path_buf()),
+        namespace: "/".into(),
+        service_mapping: "enhanced".into(),
+        ..Default::default()
+    }
+}
+
+fn bad_input_inside_the_namespace() {
+    use node_shell::{NoParameters, NodeShell};
+    use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
+
     let dir = tempfile::tempdir().expect("temp dir");
     let q_tables = dir.path().join("q_tables");
     std::fs::create_dir_all(&q_tables).expect("mkdir");
@@ -158,32 +220,7 @@ fn bad_input_inside_the_namespace() {
     std::fs::write(&corrupt, &corrupt_bytes).expect("writes cluster 1");
     let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
 
-    let node_params = dir.path().join("behaviour_policy.yaml");
-    std::fs::write(
-        &node_params,
-        format!(
-            "behaviour_policy:\n  ros__parameters:\n    user_model_file: {:?}\n    \
-             q_table_dir: {:?}\n",
-            path(&user_models),
-            path(&q_tables)
-        ),
-    )
-    .expect("writes");
-    let probe_params = dir.path().join("probe.yaml");
-    std::fs::write(
-        &probe_params,
-        "behaviour_policy_probe:\n  ros__parameters: {}\n",
-    )
-    .expect("writes");
-    let log = dir.path().join("node.log");
-    let mut node = NodeProcess(
-        Command::new(env!("CARGO_BIN_EXE_behaviour_policy"))
-            .args(["run", "--params-file", &path(&node_params)])
-            .stdout(std::fs::File::create(dir.path().join("node.out")).expect("log"))
-            .stderr(std::fs::File::create(&log).expect("log"))
-            .spawn()
-            .expect("starts behaviour_policy run"),
-    );
+    let (mut node, probe_params, log) = start_node(dir.path(), &q_tables, "");
     let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
 
     // What the node must do with the valid result and the valid call: the same as this
@@ -220,14 +257,9 @@ fn bad_input_inside_the_namespace() {
         .build()
         .expect("runtime");
     let (refused_calls, refused_results) = runtime.block_on(async {
-        let options = ShellOptions {
-            params_file: Some(probe_params.clone()),
-            namespace: "/".into(),
-            service_mapping: "enhanced".into(),
-            ..Default::default()
-        };
         let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &options).expect("probe node");
+            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
+                .expect("probe node");
         let decide = shell.client(DECIDE_ACTION).expect("client");
         let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
         let mut decisions = shell.subscribe(DECISION, 16).expect("subscription");
@@ -434,5 +466,109 @@ fn bad_input_inside_the_namespace() {
     println!(
         "over DDS: {refused_calls} decisions refused, {refused_results} results not learned, 1 \
          learned, then 1 decision equal to the in-process policy's; the corrupt file unchanged"
+    );
+}
+
+fn per_user_inside_the_namespace() {
+    use node_shell::{NoParameters, NodeShell};
+    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let q_tables = dir.path().join("q_tables");
+    std::fs::create_dir_all(&q_tables).expect("mkdir");
+    let cluster_0 = q_tables.join("cluster_0.json");
+    cluster_0_file().save(&cluster_0).expect("writes cluster 0");
+    let user_u1 = q_tables.join("user_u1.json");
+    let (mut node, probe_params, log) =
+        start_node(dir.path(), &q_tables, "    per_user_q_tables: true\n");
+    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    runtime.block_on(async {
+        let (mut shell, NoParameters {}) =
+            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
+                .expect("probe node");
+        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
+        assert!(
+            shell
+                .wait_for_service(&decide, Duration::from_secs(30))
+                .await,
+            "no DecideAction server:\n{}",
+            node_log()
+        );
+        let start = BehaviourState::from_state(State::START);
+        let r = decide
+            .call(request(0, 1, start), Duration::from_secs(10))
+            .await
+            .expect("answers");
+        assert!(r.ok, "{}", r.error);
+        assert!(
+            r.decision.model_used.starts_with("user u1 (")
+                && r.decision.model_used.ends_with("user_u1.json, 0 updates)"),
+            "{}",
+            r.decision.model_used
+        );
+        let made = QTableFile::load(&user_u1).expect("the user's table is on disk");
+        assert_eq!(made.owner, QTableOwner::User("u1".into()));
+        assert_eq!(made.table, initial_table(), "a copy of cluster 0's table");
+
+        assert!(
+            results
+                .wait_for_subscribers(&shell, Duration::from_secs(30))
+                .await,
+            "the node does not subscribe to {}",
+            SEQUENCE_RESULT.name
+        );
+        // Sent twice, as a respawned game manager's durable writer would: learned once.
+        for _ in 0..2 {
+            assert!(results.send(good_result("good", 0)), "publishes");
+        }
+        let learned = wait_for(Duration::from_secs(20), || {
+            let user = QTableFile::load(&user_u1).ok().filter(|f| f.updates > 0)?;
+            let cluster = QTableFile::load(&cluster_0)
+                .ok()
+                .filter(|f| f.updates > 0)?;
+            Some((user, cluster))
+        })
+        .await;
+        let (user, cluster) =
+            learned.unwrap_or_else(|| panic!("the result was not learned:\n{}", node_log()));
+        let told = wait_for(Duration::from_secs(20), || {
+            node_log()
+                .contains("already learned from this sequence")
+                .then_some(())
+        })
+        .await;
+        assert!(
+            told.is_some(),
+            "the second copy was not seen:\n{}",
+            node_log()
+        );
+        drop((decide, results));
+        shell.stop().await;
+        // Both started from the same table and learned the same sequence.
+        assert_eq!((user.updates, cluster.updates), (1, 1));
+        assert_eq!(user.table, cluster.table);
+        assert_ne!(user.table, initial_table());
+    });
+    let status = node.interrupt(Duration::from_secs(20));
+    let text = node_log();
+    assert!(status.success(), "the node exited with {status}:\n{text}");
+    assert!(
+        text.contains("already learned from this sequence"),
+        "{text}"
+    );
+    assert_eq!(
+        QTableFile::load(&user_u1).expect("loads").updates,
+        1,
+        "learned once"
+    );
+    println!(
+        "over DDS, per user: user_u1.json made from cluster 0's table at u1's first decision, \
+         both learned the result once"
     );
 }

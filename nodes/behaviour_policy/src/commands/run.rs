@@ -74,7 +74,8 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
         params.seed(),
         params.default_cluster,
         |k| pretrain(&models[k], learning, &params, pretraining, k),
-    );
+    )
+    .with_user_tables(params.per_user_q_tables);
     {
         let mut calls = shell.serve(DECIDE_ACTION, |e| DecideActionResponse {
             ok: false,
