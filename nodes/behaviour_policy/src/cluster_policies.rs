@@ -276,10 +276,16 @@ impl ClusterPolicies {
         let k = self.cluster(result.user_model_cluster)?;
         let t = transition(result)?;
         let (session, index) = (&result.session_id, result.sequence_index);
+        let per_user = self.user_table_for(&result.user_id);
+        if per_user {
+            // Made (if this result is the user's first event) before the cluster learns it,
+            // so the copy does not hold this result already.
+            let _ = self.policy_for(&result.user_id, k);
+        }
         let cluster = self
             .ready(k)
             .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
-        if !self.user_table_for(&result.user_id) {
+        if !per_user {
             return cluster;
         }
         let user = self
@@ -584,6 +590,15 @@ mod tests {
             "{}",
             again.model_used
         );
+
+        // A result as a user's first event (a session the node never decided for): the
+        // user's table is made from the cluster's before the cluster learns it, so both
+        // hold it once.
+        let (_, result_4) = for_user("u4", "s4");
+        respawned.learn(&result_4).expect("learns");
+        let u4 = on_disk(d, "user_u4.json");
+        assert_eq!(u4.updates, 1);
+        assert_eq!(u4.table, on_disk(d, "cluster_0.json").table);
 
         // Off (the default), users share their cluster's table and no user file is made.
         let (ask_3, _) = for_user("u3", "s3");
