@@ -7,6 +7,7 @@
 # repository) from the seeds in target/seeds.<pid>/TARGET (generated, plus the repository's own
 # files); crashes, timeouts and out-of-memory inputs land in artifacts/TARGET/.
 # PLATEAU=600 fuzz/run.sh 3600 TARGET  stops TARGET early once 10 minutes bring no new edge.
+# STABLE=1 PLATEAU=600 ...  the same, counting only edges that do not depend on the hash seed.
 # MERGE=1 fuzz/run.sh 0 TARGET  minimises corpus/TARGET in place: a subset of the inputs
 # (smallest first) that still reaches every coverage edge (libFuzzer -merge=1 -use_counters=0; hit
 # counts are dropped, which keeps the kept corpora small). The seeds stay out of it: every run
@@ -67,10 +68,34 @@ max_len() { case $1 in
 
 # PLATEAU=S: stop a target once its edge coverage ("cov:" in libFuzzer's status lines, not
 # the slowly growing "ft:" features) has not grown for S seconds: a plateau, written to the log.
+# STABLE=1 with it: count the edges with stable_edges.sh every S seconds instead (the corpus
+# and seeds run once by the same binary, leaving out the edges the hash seed decides), and
+# stop when one count is no higher than the one before. For the YAML targets, whose "cov:"
+# moves by chance (stable_edges.sh says why).
+stable_count() {
+  BIN="$bin/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
+    sed -n 's/.*: \([0-9]*\) stable edges.*/\1/p'
+}
 watch_plateau() {
   local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov pid
   sleep 5
   pid=$(pgrep -n -f "release/$t " || true)
+  if [ "${STABLE:-0}" = 1 ]; then
+    while [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; do
+      sleep "$quiet"
+      kill -0 "$pid" 2>/dev/null || return 0
+      cov=$(stable_count "$t" || true)
+      [ -n "$cov" ] || continue
+      echo "=== $t: $cov stable edges after $((SECONDS - since)) s" | tee -a "$log"
+      if [ "$best" -gt 0 ] && [ "$cov" -le "$best" ]; then
+        echo "=== $t: plateau, $best stable edges, none new for $quiet s" | tee -a "$log"
+        kill -INT "$pid"
+        return 0
+      fi
+      best=$cov
+    done
+    return 0
+  fi
   while [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; do
     cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
     if [ -n "$cov" ] && [ "$cov" -gt "$best" ]; then best=$cov; since=$SECONDS; fi
