@@ -193,19 +193,20 @@ impl ClusterPolicies {
     /// The table that decides for `user_id` in cluster `k`: the user's own with per-user
     /// tables (opened, or made from the cluster's table, on first use), else the cluster's.
     fn policy_for(&mut self, user_id: &str, k: usize) -> Result<&mut PersistentPolicy, ServeError> {
-        if !self.user_table_for(user_id) {
+        let Some(file) = self.user_file(user_id) else {
             return self.ready(k);
-        }
+        };
         // A user with no table yet whose cluster is unavailable has nothing to start from:
         // the cluster's refusal, and no entry, so a later request with a usable cluster
-        // makes their table.
-        let owner = QTableOwner::User(user_id.to_string());
-        let on_disk = owner.file_name().is_ok_and(|f| self.dir.join(f).exists());
+        // makes their table. (The file is looked for only until the table is open.)
         let unopened = self
             .users
             .as_ref()
             .is_some_and(|u| !u.contains_key(user_id));
-        if unopened && !on_disk && ready(&mut self.tables[k]).is_err() {
+        if unopened
+            && matches!(self.tables[k], OwnedTable::Unavailable { .. })
+            && !self.dir.join(file).exists()
+        {
             return self.ready(k);
         }
         let users = match self.users {
@@ -230,19 +231,20 @@ impl ClusterPolicies {
         })
     }
 
-    /// Whether `user_id` gets a table of their own: per-user tables are on, and the id can
-    /// name a file (a warning, once, for one that cannot: its cluster's table serves it).
-    fn user_table_for(&mut self, user_id: &str) -> bool {
+    /// The file of `user_id`'s own table, if they get one: per-user tables are on, and the
+    /// id can name a file (a warning, once, for one that cannot: its cluster's table serves
+    /// it).
+    fn user_file(&mut self, user_id: &str) -> Option<String> {
         if self.users.is_none() || user_id.is_empty() {
-            return false;
+            return None;
         }
         match QTableOwner::User(user_id.to_string()).file_name() {
-            Ok(_) => true,
+            Ok(file) => Some(file),
             Err(e) => {
                 if self.unnamed_users.insert(user_id.to_string()) {
                     tracing::warn!("{e}: the user's cluster's Q-table serves them");
                 }
-                false
+                None
             }
         }
     }
@@ -276,10 +278,11 @@ impl ClusterPolicies {
         let k = self.cluster(result.user_model_cluster)?;
         let t = transition(result)?;
         let (session, index) = (&result.session_id, result.sequence_index);
-        let per_user = self.user_table_for(&result.user_id);
+        let per_user = self.user_file(&result.user_id).is_some();
         if per_user {
-            // Made (if this result is the user's first event) before the cluster learns it,
-            // so the copy does not hold this result already.
+            // Opened, or made if this result is the user's first event, before the cluster
+            // learns it, so the copy does not hold this result already. Its refusal, if any,
+            // comes back from the second call below.
             let _ = self.policy_for(&result.user_id, k);
         }
         let cluster = self

@@ -341,13 +341,7 @@ impl GameManager {
                 // the session was held or paused, or one still pending, which may have gone
                 // to a policy that died meanwhile (its answer, if any, is then superseded).
                 if self.phase == Phase::Deciding && self.current.plan.is_none() {
-                    if let Some(old) = self.current.request_id.take() {
-                        self.log(
-                            LogLevel::Info,
-                            format!("asking the policy again (request {old} still unanswered)"),
-                        );
-                    }
-                    self.request_decision(now);
+                    self.ask_policy_again("the session goes on", now);
                 }
                 self.maybe_present(now);
             }

@@ -139,7 +139,7 @@ impl GameManager {
     /// or for its loss (then the session is held) rather than playing the fallback. Its
     /// answer to the request still counts if it comes meanwhile. True if it waits.
     pub(super) fn wait_for_silent_policy(&mut self, now: i64) -> bool {
-        if self.current.policy_silence != PolicySilence::NotWaited {
+        if self.current.policy_silence != PolicySilence::NotWaited || self.paused() {
             return false;
         }
         let Some(silent_ns) = self.watched.silent_ns(BEHAVIOUR_POLICY_NODE, now) else {
@@ -169,23 +169,24 @@ impl GameManager {
 
     /// A heartbeat of the policy: asks it again if the current sequence waits for it.
     pub(super) fn on_policy_heard(&mut self, now: i64) {
-        if self.current.policy_silence != PolicySilence::Waiting
-            || self.paused()
-            || self.phase != Phase::Deciding
-            || self.current.plan.is_some()
+        if self.current.policy_silence == PolicySilence::Waiting
+            && !self.paused()
+            && self.phase == Phase::Deciding
+            && self.current.plan.is_none()
         {
-            return;
+            self.ask_policy_again("the policy is heard again", now);
         }
-        // The request went to a process that may be gone: a new one, and the old one's
-        // answer, if any, is superseded.
-        let old = self.current.request_id.take();
-        self.log(
-            LogLevel::Info,
-            format!(
-                "the policy is heard again: asking it again (request {} unanswered)",
-                old.map_or_else(|| "none".to_string(), |id| id.to_string())
-            ),
-        );
+    }
+
+    /// A new request for the current sequence. One still pending may have gone to a process
+    /// that died meanwhile: its answer, if any, is superseded (ignored by its id).
+    pub(super) fn ask_policy_again(&mut self, why: &str, now: i64) {
+        if let Some(old) = self.current.request_id.take() {
+            self.log(
+                LogLevel::Info,
+                format!("{why}: asking the policy again (request {old} still unanswered)"),
+            );
+        }
         self.request_decision(now);
     }
 

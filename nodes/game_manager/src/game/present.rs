@@ -131,7 +131,7 @@ impl GameManager {
             Timer::PolicyDeadline { request_id } => {
                 if self.phase == Phase::Deciding && self.current.request_id == Some(request_id) {
                     let s = self.params.policy_deadline_s;
-                    if !self.paused() && self.wait_for_silent_policy(now) {
+                    if self.wait_for_silent_policy(now) {
                         return;
                     }
                     self.current.request_id = None;
