@@ -133,21 +133,53 @@ impl GameManager {
         })
     }
 
-    /// At the policy's deadline, with the session going on: if the policy's heartbeat is
+    /// At the policy's deadline (`second_look` false), or at the look at its heartbeat that
+    /// the deadline put off (true). With the session going on, a policy whose heartbeat is
     /// silent too, as it is for a process that died shortly before or after the request and
-    /// that the watch cannot call lost yet, waits for its next heartbeat (then asks it again)
-    /// or for its loss (then the session is held) rather than playing the fallback. Its
-    /// answer to the request still counts if it comes meanwhile. True if it waits.
-    pub(super) fn wait_for_silent_policy(&mut self, now: i64) -> bool {
-        if self.current.policy_silence != PolicySilence::NotWaited || self.paused() {
-            return false;
+    /// that the watch cannot call lost yet, is waited for: its next heartbeat asks it again,
+    /// its loss holds the session, and its answer to the request still counts meanwhile. A
+    /// policy heard less than [`POLICY_SILENT_NS`] ago may have died since, so the deadline
+    /// looks again once it would count as silent: the fallback waits at most that long for
+    /// a policy that beats but does not answer, and a death just before the deadline is
+    /// waited for too. Else the fallback, or, paused or held, a new request on resume.
+    pub(super) fn on_policy_deadline(&mut self, request_id: u64, second_look: bool, now: i64) {
+        if self.phase != Phase::Deciding || self.current.request_id != Some(request_id) {
+            return;
         }
-        let Some(silent_ns) = self.watched.silent_ns(BEHAVIOUR_POLICY_NODE, now) else {
-            return false;
-        };
-        if silent_ns < POLICY_SILENT_NS {
-            return false;
+        let may_wait = self.current.policy_silence == PolicySilence::NotWaited && !self.paused();
+        if let Some(silent_ns) = self.watched.silent_ns(BEHAVIOUR_POLICY_NODE, now)
+            && may_wait
+        {
+            if silent_ns >= POLICY_SILENT_NS {
+                self.wait_for_silent_policy(silent_ns, now);
+                return;
+            }
+            if !second_look {
+                let look_at = now + POLICY_SILENT_NS - silent_ns;
+                self.set_timer(Timer::PolicyHeartbeatLook { request_id }, look_at);
+                return;
+            }
         }
+        self.current.request_id = None;
+        let s = self.params.policy_deadline_s;
+        if self.paused() {
+            // Nothing plays while held (a lost policy is the likely cause) or paused, so
+            // waiting costs the child nothing: the policy is asked again when the session
+            // goes on, rather than a fallback played.
+            self.log(
+                LogLevel::Info,
+                format!(
+                    "the policy did not answer within {s} s while the session was paused or \
+                     held; it is asked again when the session goes on"
+                ),
+            );
+        } else {
+            self.fall_back(format!("the policy did not answer within {s} s"), now);
+        }
+    }
+
+    /// Waits for a policy silent at its deadline (see [`Self::on_policy_deadline`]).
+    fn wait_for_silent_policy(&mut self, silent_ns: i64, now: i64) {
         self.current.policy_silence = PolicySilence::Waiting;
         let index = self.session.as_ref().map_or(0, |s| s.index);
         let silent_s = silent_ns as f64 * 1e-9;
@@ -164,7 +196,6 @@ impl GameManager {
         self.status =
             format!("sequence {index}: waiting for the behaviour policy (silent {silent_s:.1} s)");
         self.publish_state(now);
-        true
     }
 
     /// A heartbeat of the policy: asks it again if the current sequence waits for it.

@@ -46,7 +46,14 @@ enum Phase {
 /// What a timer is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Timer {
-    PolicyDeadline { request_id: u64 },
+    PolicyDeadline {
+        request_id: u64,
+    },
+    /// A second look at the policy's heartbeat, put off by a deadline that found it heard
+    /// too recently to tell a dead process from a slow one.
+    PolicyHeartbeatLook {
+        request_id: u64,
+    },
     SpeechDone,
     FeedbackDone,
     Word(usize),

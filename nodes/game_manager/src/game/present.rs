@@ -128,28 +128,9 @@ impl GameManager {
 
     pub(super) fn on_timer(&mut self, timer: Timer, now: i64) {
         match timer {
-            Timer::PolicyDeadline { request_id } => {
-                if self.phase == Phase::Deciding && self.current.request_id == Some(request_id) {
-                    let s = self.params.policy_deadline_s;
-                    if self.wait_for_silent_policy(now) {
-                        return;
-                    }
-                    self.current.request_id = None;
-                    if self.paused() {
-                        // Nothing plays while held (a lost policy is the likely cause) or
-                        // paused, so waiting costs the child nothing: the policy is asked
-                        // again when the session goes on, rather than a fallback played.
-                        self.log(
-                            LogLevel::Info,
-                            format!(
-                                "the policy did not answer within {s} s while the session was \
-                                 paused or held; it is asked again when the session goes on"
-                            ),
-                        );
-                    } else {
-                        self.fall_back(format!("the policy did not answer within {s} s"), now);
-                    }
-                }
+            Timer::PolicyDeadline { request_id } => self.on_policy_deadline(request_id, false, now),
+            Timer::PolicyHeartbeatLook { request_id } => {
+                self.on_policy_deadline(request_id, true, now)
             }
             Timer::SpeechDone => {
                 self.current.speech_done = true;

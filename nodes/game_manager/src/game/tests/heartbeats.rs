@@ -398,7 +398,24 @@ fn a_policy_dying_just_after_the_request_is_waited_for_too() {
 }
 
 #[test]
-fn a_policy_that_beats_but_does_not_answer_gets_the_fallback_at_its_deadline() {
+fn a_policy_dying_just_before_its_deadline_is_waited_for_too() {
+    // Dies 0.2 s before the deadline: heard 0.2-0.3 s before it, too recently to count as
+    // silent then, so the deadline looks again 0.5 s after that heartbeat and waits. Back (a
+    // new pid, never lost) at +5 s and asked again then.
+    let (h, requests) = policy_around_step_2(1, &[(1.8, 0.0), (5.0, f64::INFINITY)]);
+    assert_eq!(requests, vec![0, 5 * S]);
+    assert_eq!(step_2_fallback(&h), (false, 0));
+    assert!(
+        h.warnings()
+            .iter()
+            .any(|w| w.contains("no heartbeat for 0.5 s: waiting")),
+        "{:?}",
+        h.warnings()
+    );
+}
+
+#[test]
+fn a_slow_policy_gets_the_fallback_at_most_half_a_second_after_its_deadline() {
     // Alive (a restart within the timeout, heartbeats throughout) but silent: slow, not dead.
     let (h, requests) = policy_around_step_2(1, &[(3.0, 0.0), (3.0, f64::INFINITY)]);
     assert_eq!(requests, vec![0]);
@@ -408,6 +425,40 @@ fn a_policy_that_beats_but_does_not_answer_gets_the_fallback_at_its_deadline() {
         "{:?}",
         h.warnings()
     );
+    // The deadline (+2 s) heard it within 0.1 s, and looked again 0.5 s after that beat.
+    let t2 = decide_time(2);
+    let fell_back_at = h
+        .log
+        .iter()
+        .find_map(|(t, o)| match o {
+            Output::Log { message, .. } if message.starts_with("sequence 2: safe fallback") => {
+                Some(*t - t2)
+            }
+            _ => None,
+        })
+        .expect("a fallback for sequence 2");
+    assert!(
+        (ns(2.4)..=ns(2.5)).contains(&fell_back_at),
+        "fallback {fell_back_at} ns after the request"
+    );
+}
+
+#[test]
+fn an_answer_in_the_second_look_at_the_heartbeat_still_counts() {
+    // The policy beats throughout and answers sequence 2 at +2.3 s: after its deadline,
+    // before the look that would have played the fallback.
+    let policy: Box<dyn FnMut(&DecideActionRequest) -> PolicyReply> =
+        Box::new(|req| PolicyReply::Answer {
+            after_s: if req.step == 2 { 2.3 } else { 0.05 },
+            response: rule_decision(req),
+        });
+    let mut h = Harness::new(params(true), policy, scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 400 * S);
+    assert_eq!(step_2_fallback(&h), (false, 0));
+    assert!(h.warnings().iter().all(|w| !w.contains("fallback")));
 }
 
 #[test]
