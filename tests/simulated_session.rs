@@ -596,9 +596,10 @@ echo "launch_exit=$?"
     let fallbacks = sequences_where(&|r| r["policy_fallback"] == true);
     eprintln!(
         "game_manager: SIGKILL -> bridge showed it lost {bridge_lost_s:.3} s; recovered at \
-         sequence {interrupted}, resumed {:.1} s after the kill; decisions per step {:?}, \
+         sequence {interrupted}, resumed {:.1} s after the kill ({}); decisions per step {:?}, \
          policy fallbacks at sequences {fallbacks:?}",
         carried_out[0].log_time as f64 * 1e-9 - killed_at,
+        respawn_readiness(&stderr, "game_manager"),
         &decided[1..]
     );
 
@@ -634,6 +635,60 @@ echo "launch_exit=$?"
     );
     if std::env::var_os("QT_KEEP_TEST_OUTPUT").is_none() {
         let _ = std::fs::remove_dir_all(&out);
+    }
+}
+
+/// How long the respawned `node` took from its start to "game manager ready", and what it
+/// logged about the policy meanwhile: the part of a slow resume spent in the node itself
+/// (it waits up to policy_startup_wait_s for the DecideAction service) rather than in the
+/// therapist console finding it.
+fn respawn_readiness(stderr: &str, node: &str) -> String {
+    let Some(respawn) = stderr.split(&format!("restarted {node} (pid")).nth(1) else {
+        return "no respawn logged".into();
+    };
+    // The nodes colour their logs: drop the escape sequences (ESC [ ... m).
+    let mut plain = String::with_capacity(respawn.len());
+    let mut chars = respawn.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            chars.by_ref().find(|&d| d == 'm');
+        } else {
+            plain.push(c);
+        }
+    }
+    let respawn = plain;
+    let prefix = format!("[{node}] ");
+    // Seconds of the day of a line `[node] 2026-12-02T12:27:38.436650Z  INFO message`.
+    let time_of = |line: &str| -> Option<f64> {
+        let time = line.strip_prefix(&prefix)?.split_whitespace().next()?;
+        let clock = time.split('T').nth(1)?.trim_end_matches('Z');
+        let mut parts = clock.split(':');
+        let (h, m, sec) = (parts.next()?, parts.next()?, parts.next()?);
+        Some(
+            h.parse::<f64>().ok()? * 3600.0
+                + m.parse::<f64>().ok()? * 60.0
+                + sec.parse::<f64>().ok()?,
+        )
+    };
+    let find = |words: &str| {
+        respawn
+            .lines()
+            .find(|l| l.starts_with(&prefix) && l.contains(words))
+    };
+    let (Some(started), Some(ready)) = (find("node started"), find("game manager ready")) else {
+        return "respawn not ready in the log".into();
+    };
+    let policy = if find("behaviour policy reachable").is_some() {
+        "the policy found"
+    } else {
+        "the policy not found"
+    };
+    match (time_of(started), time_of(ready)) {
+        (Some(a), Some(b)) => format!(
+            "respawn ready {:.1} s after its start, {policy}",
+            (b - a).rem_euclid(86_400.0)
+        ),
+        _ => format!("respawn ready, {policy}"),
     }
 }
 

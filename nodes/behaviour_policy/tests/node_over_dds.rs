@@ -55,6 +55,10 @@ fn with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds(
         ),
         "{stdout}"
     );
+    assert!(
+        stdout.contains("over DDS, a second node on the same q_table_dir: refused"),
+        "{stdout}"
+    );
 }
 
 /// The node process; killed if the test ends early, so no node outlives a failed run.
@@ -515,6 +519,23 @@ fn per_user_inside_the_namespace() {
         let made = QTableFile::load(&user_u1).expect("the user's table is on disk");
         assert_eq!(made.owner, QTableOwner::User("u1".into()));
         assert_eq!(made.table, initial_table(), "a copy of cluster 0's table");
+
+        // A second copy of the node on the same Q-tables (a launch file run twice) refuses to
+        // start, naming the first; the first goes on serving and learning below.
+        let second = Command::new(env!("CARGO_BIN_EXE_behaviour_policy"))
+            .args(["run", "--params-file"])
+            .arg(dir.path().join("behaviour_policy.yaml"))
+            .output()
+            .expect("runs a second behaviour_policy");
+        let said = String::from_utf8_lossy(&second.stderr);
+        assert!(!second.status.success(), "a second node started:\n{said}");
+        let refusal = format!(
+            "is in use by another behaviour_policy (pid {}): two would overwrite each other's \
+             Q-tables",
+            node.0.id()
+        );
+        assert!(said.contains(&refusal), "{said}");
+        println!("over DDS, a second node on the same q_table_dir: refused ({refusal})");
 
         assert!(
             results

@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 use game_manager::recovery::{self, RecoveredSession};
 use game_manager::session_file::SessionFiles;
 use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
+use node_shell::instance_lock::InstanceLock;
 use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{
@@ -58,11 +59,21 @@ struct Outboxes {
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let Command::Run(args) = Cli::parse().command;
+    let sessions_dir = match &args.sessions_dir {
+        Some(dir) => dir.clone(),
+        None => {
+            let (params, _): (GameManagerParams, _) = args.shell.parameters("game_manager")?;
+            params.sessions_dir.into()
+        }
+    };
+    // Held while the node runs: a second game manager on the same directory would recover
+    // this one's session and write its files too. Taken before joining the graph, so a
+    // refused copy never beats under our name.
+    let _sessions_dir = InstanceLock::acquire(&sessions_dir, "game_manager", "session files")
+        .context("sessions_dir")?;
     let (mut shell, mut params): (NodeShell, GameManagerParams) =
         NodeShell::start("game_manager", &args.shell)?;
-    if let Some(dir) = &args.sessions_dir {
-        params.sessions_dir = dir.display().to_string();
-    }
+    params.sessions_dir = sessions_dir.display().to_string();
     let result = run(&mut shell, params).await;
     shell.stop().await;
     result

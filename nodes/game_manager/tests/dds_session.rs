@@ -157,6 +157,8 @@ fn a_killed_node_loses_no_scored_sequence_and_its_restart_goes_on_with_the_same_
         {gm} run --sessions-dir {d}/sessions >{d}/gm1.out 2>{d}/gm1.err &
         G=$!
         {peer} --session s --timeout-s 8 --override-level 3 >{d}/peer1.out 2>{d}/peer1.err
+        {gm} run --sessions-dir {d}/sessions >{d}/second.out 2>{d}/second.err
+        echo "{{\"second_game_manager\":$?}}"
         kill -KILL $G; wait $G
         cp {d}/sessions/s.jsonl {d}/crashed.jsonl
         {gm} run --sessions-dir {d}/sessions >{d}/gm2.out 2>{d}/gm2.err &
@@ -187,6 +189,14 @@ fn a_killed_node_loses_no_scored_sequence_and_its_restart_goes_on_with_the_same_
         exit.last().map(|e| e["game_manager"].clone()),
         Some(0.into()),
         "{context}"
+    );
+    // A second game manager on the same directory, started while the first ran, refused to
+    // start (it would have recovered the first one's session).
+    assert_eq!(exit[0]["second_game_manager"], 1, "{context}");
+    assert!(
+        read("second.err").contains("sessions is in use by another game_manager (pid "),
+        "{}",
+        read("second.err")
     );
     let seen = |f: &str| -> Vec<u64> {
         json_lines(&read(f))

@@ -6,6 +6,7 @@
 
 pub mod drops;
 pub mod heartbeat_watch;
+pub mod instance_lock;
 pub mod logging;
 pub mod params;
 pub mod security;

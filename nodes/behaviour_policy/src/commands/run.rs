@@ -8,6 +8,7 @@ use anyhow::Context;
 use behaviour_policy::experiments::{EpochScheme, RunSpec, best_run, train_run};
 use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
 use behaviour_policy::{BehaviourPolicyParams, ClusterPolicies, Learning, Mode, QTable};
+use node_shell::instance_lock::InstanceLock;
 use node_shell::{NodeShell, ShellOptions, header_now};
 use qt_therapy_msgs::DecideActionResponse;
 use qt_therapy_msgs::topics::{BEHAVIOUR_POLICY_NODE, DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
@@ -53,6 +54,15 @@ fn pretrain(
 }
 
 pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
+    // Held while the node runs: a second policy on the same tables would overwrite its
+    // learning. Taken before joining the graph, so a refused copy never beats under our name.
+    let (params, _): (BehaviourPolicyParams, _) = options.parameters(BEHAVIOUR_POLICY_NODE)?;
+    let _q_table_dir = InstanceLock::acquire(
+        Path::new(&params.q_table_dir),
+        BEHAVIOUR_POLICY_NODE,
+        "Q-tables",
+    )
+    .context("q_table_dir")?;
     let (mut shell, params): (NodeShell, BehaviourPolicyParams) =
         NodeShell::start(BEHAVIOUR_POLICY_NODE, &options)?;
     let learning = params.learning()?;
