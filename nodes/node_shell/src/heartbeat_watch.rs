@@ -5,6 +5,10 @@
 //! timeout is a restart that was never lost. Times are the caller's monotonic nanoseconds; what
 //! a loss means (silence the robot, pause the child page) stays with the caller.
 //!
+//! Heartbeats are matched by node name, so two processes beating under one name (a node started
+//! twice) would look like one node restarting again and again; a pid that comes back within
+//! the timeout after it was replaced is told as such, once per pair.
+//!
 //! Watching starts with the first heartbeat from any watched node: a core that hears none (a
 //! replay, a unit test) watches nothing, and from then on a node never heard is lost one
 //! timeout later.
@@ -29,6 +33,10 @@ struct Watched {
     pid: Option<u32>,
     /// Since when it is lost.
     lost_since: Option<i64>,
+    /// The pid its last new pid replaced, and when.
+    replaced: Option<(u32, i64)>,
+    /// Two pids found beating together (smaller first), told once.
+    twice: Option<(u32, u32)>,
 }
 
 /// What one heartbeat told.
@@ -42,6 +50,9 @@ pub enum Heard {
     Alive,
     /// A new pid within the timeout: never lost, but its process (and state) is new.
     Restarted { old_pid: u32 },
+    /// A pid replaced less than the timeout ago beats again: two processes beat under this
+    /// name (told once per pair; their alternation afterwards is [`Heard::Alive`]).
+    Twice { other_pid: u32 },
     /// A lost node is back.
     Back {
         /// Since its previous heartbeat (or the start of the watch).
@@ -103,6 +114,8 @@ impl HeartbeatWatch {
                     last_ns: now_ns,
                     pid: None,
                     lost_since: None,
+                    replaced: None,
+                    twice: None,
                 };
                 self.nodes.insert(name.clone(), w);
             }
@@ -122,7 +135,21 @@ impl HeartbeatWatch {
         }
         match old_pid {
             _ if started_now => Heard::WatchStarted,
-            Some(old_pid) if old_pid != pid => Heard::Restarted { old_pid },
+            Some(old_pid) if old_pid != pid => {
+                let back_again = w
+                    .replaced
+                    .is_some_and(|(p, at)| p == pid && now_ns.saturating_sub(at) < self.timeout_ns);
+                w.replaced = Some((old_pid, now_ns));
+                let pair = (old_pid.min(pid), old_pid.max(pid));
+                if w.twice == Some(pair) {
+                    Heard::Alive
+                } else if back_again {
+                    w.twice = Some(pair);
+                    Heard::Twice { other_pid: old_pid }
+                } else {
+                    Heard::Restarted { old_pid }
+                }
+            }
             _ => Heard::Alive,
         }
     }
@@ -252,6 +279,43 @@ mod tests {
         );
         assert_eq!(w.heartbeat("policy", 11, 4 * S), Heard::Alive);
         assert!(w.lost().is_empty());
+    }
+
+    #[test]
+    fn two_processes_beating_under_one_name_are_told_once() {
+        let mut w = watch();
+        w.heartbeat("policy", 10, 0);
+        assert_eq!(
+            w.heartbeat("policy", 11, S / 10),
+            Heard::Restarted { old_pid: 10 }
+        );
+        // Pid 10 again, 0.1 s after it was replaced: both run.
+        assert_eq!(
+            w.heartbeat("policy", 10, 2 * S / 10),
+            Heard::Twice { other_pid: 11 }
+        );
+        for i in 3..40 {
+            let pid = if i % 2 == 0 { 10 } else { 11 };
+            assert_eq!(w.heartbeat("policy", pid, i * S / 10), Heard::Alive);
+        }
+        // A third copy is news.
+        assert_eq!(
+            w.heartbeat("policy", 12, 4 * S),
+            Heard::Restarted { old_pid: 11 }
+        );
+    }
+
+    #[test]
+    fn a_pid_seen_again_only_after_the_timeout_is_a_restart() {
+        // 10 replaced by 11, which dies; long after, a new process happens to get pid 10.
+        let mut w = watch();
+        w.heartbeat("policy", 10, 0);
+        w.heartbeat("policy", 11, S);
+        w.heartbeat("policy", 11, 2 * S);
+        assert_eq!(
+            w.heartbeat("policy", 10, 5 * S + 1),
+            Heard::Restarted { old_pid: 11 }
+        );
     }
 
     #[test]

@@ -93,6 +93,11 @@ impl Bridge {
                 "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
                 hb.pid
             ),
+            Heard::Twice { other_pid } => tracing::warn!(
+                "two game managers beat (pids {other_pid} and {}): one was started twice; \
+                 stop one",
+                hb.pid
+            ),
         }
     }
 

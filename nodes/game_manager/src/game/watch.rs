@@ -44,6 +44,14 @@ impl GameManager {
                     hb.node_name, hb.pid
                 ),
             ),
+            Heard::Twice { other_pid } => self.log(
+                LogLevel::Warn,
+                format!(
+                    "two processes beat as node {} (pids {other_pid} and {}): it was started \
+                     twice; stop one, as each answers, publishes and writes on its own",
+                    hb.node_name, hb.pid
+                ),
+            ),
             Heard::Back { lost_for_ns, .. } => {
                 self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now)
             }

@@ -470,3 +470,28 @@ fn a_policy_is_waited_for_once_a_sequence() {
     assert_eq!(requests, vec![0, ns(2.5)]);
     assert_eq!(step_2_fallback(&h), (true, 1));
 }
+
+#[test]
+fn a_node_started_twice_is_told_once_and_the_session_goes_on() {
+    // Two policy processes beat side by side from the start (heartbeats 50 ms apart).
+    let mut h = Harness::new(params(true), rule_policy(), scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 21, T0 + ns(0.05), T0 + 400 * S);
+    h.start("s");
+    h.run_until(T0 + 400 * S);
+    let told: Vec<String> = h
+        .warnings()
+        .into_iter()
+        .filter(|w| w.contains("two processes beat"))
+        .collect();
+    assert_eq!(
+        told,
+        vec![
+            "two processes beat as node behaviour_policy (pids 21 and 20): it was started twice; \
+             stop one, as each answers, publishes and writes on its own"
+        ]
+    );
+    assert!(h.gm.lost_nodes().is_empty());
+    assert_eq!(h.results().len(), 10, "the session went on");
+}
