@@ -1,15 +1,17 @@
 //! DDS Security end to end (only built with `--features security`): a keystore made by
 //! security/make_keystore.sh, a secured game-manager subscriber on the therapist command
-//! topic, and publishers that are authorised (tablet bridge enclave), unauthenticated (no
-//! security) and authenticated without publish permission (classifier and game-manager
-//! enclaves). An insecure control subscriber shows the unauthenticated publisher really
-//! publishes, so its silence at the secured subscriber is the security's doing.
+//! and engagement topics, and publishers that are authorised (tablet bridge enclave),
+//! unauthenticated (no security), authenticated without publish permission (classifier and
+//! game-manager enclaves), and a real identity with permissions it granted itself (signed by a
+//! CA of its own), beside the same grant signed by the real CA as a control. An insecure
+//! control subscriber shows the unauthenticated publisher really publishes, so its silence at
+//! the secured subscriber is the security's doing.
 //! Each participant is its own process (this test binary in a role), all inside one private
 //! loopback-only network namespace (tests/loopback-netns).
 
 use node_shell::{NoParameters, NodeShell, ShellOptions};
-use qt_therapy_msgs::TherapistCommand;
 use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, THERAPIST_COMMAND};
+use qt_therapy_msgs::{EngagementEstimate, TherapistCommand};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -79,6 +81,91 @@ fn make_keystore(dir: &Path, data_protection: &str) -> PathBuf {
         String::from_utf8_lossy(&made.stderr)
     );
     keystore
+}
+
+/// Makes enclave `made` in `keystore`: the identity of `from` (its certificate, from the real
+/// identity CA, and its key) with `from`'s permissions less their deny rule, so every topic
+/// may be published. `forged`: signed, like its governance, by a permissions CA of its own,
+/// which the enclave names as its permissions CA; its own DDS then lets it write anything,
+/// and only the other participants' check of its permissions against the real permissions CA
+/// can stop it (someone holding a node's key but not the permissions CA's). Not `forged`: signed
+/// by the keystore's real permissions CA, the control that shows the same grant, properly
+/// signed, is delivered.
+fn grant_everything(keystore: &Path, from: &str, made: &str, forged: bool) {
+    let enclaves = keystore.join("enclaves");
+    let source = enclaves.join(from.trim_start_matches('/'));
+    let dir = enclaves.join(made.trim_start_matches('/'));
+    std::fs::create_dir_all(&dir).expect("enclave dir");
+    for file in [
+        "cert.pem",
+        "key.pem",
+        "identity_ca.cert.pem",
+        "governance.p7s",
+    ] {
+        std::fs::copy(source.join(file), dir.join(file)).expect("copies the identity");
+    }
+    let permissions = std::fs::read_to_string(source.join("permissions.xml")).expect("reads");
+    let (before, rest) = permissions.split_once("<deny_rule>").expect("a deny rule");
+    let (_, after) = rest.split_once("</deny_rule>").expect("its end");
+    std::fs::write(dir.join("permissions.xml"), format!("{before}{after}")).expect("writes");
+    let openssl = |args: &[&str]| {
+        let out = Command::new("openssl")
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .expect("runs openssl");
+        assert!(
+            out.status.success(),
+            "openssl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let path = |p: PathBuf| p.to_str().expect("utf-8 path").to_string();
+    let (ca_cert, ca_key) = if forged {
+        openssl(&[
+            "req",
+            "-x509",
+            "-newkey",
+            "ec",
+            "-pkeyopt",
+            "ec_paramgen_curve:prime256v1",
+            "-nodes",
+            "-sha256",
+            "-days",
+            "30",
+            "-keyout",
+            "forged_ca.key.pem",
+            "-out",
+            "permissions_ca.cert.pem",
+            "-subj",
+            "/CN=qt_therapy_permissions_ca",
+        ]);
+        (
+            "permissions_ca.cert.pem".to_string(),
+            "forged_ca.key.pem".to_string(),
+        )
+    } else {
+        std::fs::copy(
+            source.join("permissions_ca.cert.pem"),
+            dir.join("permissions_ca.cert.pem"),
+        )
+        .expect("copies the permissions CA");
+        (
+            path(keystore.join("public/permissions_ca.cert.pem")),
+            path(keystore.join("private/permissions_ca.key.pem")),
+        )
+    };
+    let governance = path(enclaves.join("governance.xml"));
+    let mut signed = vec![("permissions.xml", "permissions.p7s")];
+    if forged {
+        signed.push((&governance, "governance.p7s"));
+    }
+    for (input, output) in signed {
+        openssl(&[
+            "smime", "-sign", "-text", "-in", input, "-out", output, "-signer", &ca_cert, "-inkey",
+            &ca_key,
+        ]);
+    }
 }
 
 #[test]
@@ -202,14 +289,15 @@ fn finish(mut p: Participant, dir: &Path) -> String {
     out
 }
 
-/// Counts per sender that a subscriber printed as `RECEIVED <sender> <count>`.
-fn received(out: &str) -> BTreeMap<String, u64> {
+/// Counts per sender that a subscriber printed as `<marker> <sender> <count>` (`RECEIVED` for
+/// commands, `ENGAGEMENT_RECEIVED` for engagement estimates).
+fn received(out: &str, marker: &str) -> BTreeMap<String, u64> {
     out.lines()
-        // libtest's "test ... " may precede a marker on its line.
-        .filter_map(|l| l.split_once("RECEIVED ").map(|(_, rest)| rest))
         .filter_map(|l| {
-            let (tag, n) = l.split_once(' ')?;
-            Some((tag.to_string(), n.trim().parse().ok()?))
+            // libtest's "test ... " may precede a marker on its line.
+            let mut words = l.split_whitespace().skip_while(|w| *w != marker).skip(1);
+            let tag = words.next()?;
+            Some((tag.to_string(), words.next()?.parse().ok()?))
         })
         .collect()
 }
@@ -231,6 +319,13 @@ fn commands_inside_the_namespace() {
     let d = dir.path();
     let keystore = make_keystore(d, "NONE");
     let ks = keystore.as_path();
+    grant_everything(ks, "/qt_therapy/game_manager", "/qt_therapy/forged", true);
+    grant_everything(
+        ks,
+        "/qt_therapy/game_manager",
+        "/qt_therapy/regranted",
+        false,
+    );
     let secured_sub = spawn(
         d,
         "secured_game_manager",
@@ -259,6 +354,13 @@ fn commands_inside_the_namespace() {
             "publish",
             Some((ks, "/qt_therapy/game_manager")),
         ),
+        spawn(d, "forged", "publish", Some((ks, "/qt_therapy/forged"))),
+        spawn(
+            d,
+            "regranted",
+            "publish",
+            Some((ks, "/qt_therapy/regranted")),
+        ),
     ];
     let mut status = BTreeMap::new();
     for p in publishers {
@@ -266,13 +368,19 @@ fn commands_inside_the_namespace() {
         let out = finish(p, d);
         status.insert(label, publisher_status(&out).join("; "));
     }
-    let secured = received(&finish(secured_sub, d));
-    let control = received(&finish(control_sub, d));
+    let secured_out = finish(secured_sub, d);
+    let control_out = finish(control_sub, d);
+    let secured = received(&secured_out, "RECEIVED");
+    let control = received(&control_out, "RECEIVED");
+    let secured_engagement = received(&secured_out, "ENGAGEMENT_RECEIVED");
+    let control_engagement = received(&control_out, "ENGAGEMENT_RECEIVED");
     for (label, said) in &status {
         println!("publisher {label}: {said}");
     }
-    println!("secured subscriber received: {secured:?}");
-    println!("insecure control subscriber received: {control:?}");
+    println!("secured subscriber received: {secured:?}, engagement {secured_engagement:?}");
+    println!(
+        "insecure control subscriber received: {control:?}, engagement {control_engagement:?}"
+    );
 
     // (a) the authorised, secured publisher reaches the secured subscriber.
     assert!(
@@ -311,6 +419,47 @@ fn commands_inside_the_namespace() {
             status[label]
         );
     }
+    // (d) the game manager's identity with permissions granting every topic, signed by a CA
+    // of its own: its DDS lets it write commands and engagement, and it sends, but the secured
+    // subscriber checks those permissions against the real permissions CA and takes nothing
+    // from it. The same grant signed by the real CA is delivered: the signature made the
+    // difference.
+    for label in ["forged", "regranted"] {
+        assert!(
+            status[label].contains("ENGAGEMENT allowed") && status[label].contains("SENT "),
+            "{label} was refused locally, so the remote check was not tested: {}",
+            status[label]
+        );
+    }
+    assert_eq!(secured.get("forged"), None, "{secured:?}");
+    assert!(
+        secured.get("regranted").copied().unwrap_or(0) > 0,
+        "the control grant, signed by the real CA, delivered nothing: {secured:?}"
+    );
+    // Engagement, the same way: the classifier's and the control grant's estimates arrive, the
+    // forged grant's and the unauthenticated publisher's do not (the latter's reach the
+    // insecure control).
+    for label in ["classifier", "regranted"] {
+        assert!(
+            secured_engagement.get(label).copied().unwrap_or(0) > 0,
+            "{label} delivered no engagement: {secured_engagement:?}"
+        );
+    }
+    for label in ["forged", "unauthenticated"] {
+        assert_eq!(
+            secured_engagement.get(label),
+            None,
+            "{secured_engagement:?}"
+        );
+    }
+    assert!(
+        control_engagement
+            .get("unauthenticated")
+            .copied()
+            .unwrap_or(0)
+            > 0,
+        "{control_engagement:?}"
+    );
     // The insecure control hears nothing from secured writers.
     assert_eq!(control.get("authorised"), None, "{control:?}");
     println!("DDS SECURITY CHECKED");
@@ -344,7 +493,7 @@ fn unaligned_inside_the_namespace() {
     );
     let sent_aligned = finish(aligned, d);
     let sent_unaligned = finish(unaligned, d);
-    let got = received(&finish(sub, d));
+    let got = received(&finish(sub, d), "RECEIVED");
     println!(
         "aligned: {:?}, unaligned: {:?}, received: {got:?}",
         publisher_status(&sent_aligned),
@@ -387,38 +536,71 @@ fn run_role(role: &str) {
         match role {
             "subscribe" => {
                 let mut commands = shell.subscribe(THERAPIST_COMMAND, 1024).expect("subscribe");
+                let mut engagement = shell
+                    .subscribe(ENGAGEMENT_ESTIMATE, 1024)
+                    .expect("subscribe");
                 let mut counts: BTreeMap<String, u64> = BTreeMap::new();
-                let deadline = tokio::time::Instant::now() + LISTEN;
-                while let Ok(Some(command)) =
-                    tokio::time::timeout_at(deadline, commands.recv()).await
-                {
-                    *counts.entry(command.session_id).or_default() += 1;
+                let mut engagement_counts: BTreeMap<String, u64> = BTreeMap::new();
+                let deadline = tokio::time::sleep(LISTEN);
+                tokio::pin!(deadline);
+                loop {
+                    tokio::select! {
+                        _ = &mut deadline => break,
+                        Some(command) = commands.recv() => {
+                            *counts.entry(command.session_id).or_default() += 1;
+                        }
+                        Some(estimate) = engagement.recv() => {
+                            *engagement_counts.entry(estimate.face_id).or_default() += 1;
+                        }
+                    }
                 }
                 for (tag, n) in &counts {
                     println!("RECEIVED {tag} {n}");
                 }
-                drop(commands);
+                for (tag, n) in &engagement_counts {
+                    println!("ENGAGEMENT_RECEIVED {tag} {n}");
+                }
+                drop((commands, engagement));
             }
             "publish" => {
-                // Whether this enclave may write engagement estimates (only the classifier).
-                match shell.publisher(ENGAGEMENT_ESTIMATE) {
+                // Whether this enclave may write engagement estimates (only the classifier);
+                // where it may, it sends them too, named by their face_id.
+                let engagement = match shell.publisher(ENGAGEMENT_ESTIMATE) {
                     Ok(outbox) => {
                         println!("ENGAGEMENT allowed");
-                        drop(outbox);
+                        Some(outbox)
                     }
-                    Err(e) => println!("ENGAGEMENT refused: {e:#}"),
-                }
-                let outbox = match shell.publisher(THERAPIST_COMMAND) {
-                    Ok(o) => o,
                     Err(e) => {
-                        println!("REFUSED publisher: {e:#}");
-                        shell.stop().await;
-                        return;
+                        println!("ENGAGEMENT refused: {e:#}");
+                        None
                     }
                 };
+                let outbox = match shell.publisher(THERAPIST_COMMAND) {
+                    Ok(o) => Some(o),
+                    Err(e) => {
+                        println!("REFUSED publisher: {e:#}");
+                        None
+                    }
+                };
+                if engagement.is_none() && outbox.is_none() {
+                    shell.stop().await;
+                    return;
+                }
                 let started = tokio::time::Instant::now();
                 let mut sent = 0u64;
                 while started.elapsed() < PUBLISH {
+                    if let Some(engagement) = &engagement {
+                        engagement.send(EngagementEstimate {
+                            header: node_shell::header_now(),
+                            face_id: name.clone(),
+                            label: EngagementEstimate::ENGAGED,
+                            probability: 0.9,
+                        });
+                    }
+                    let Some(outbox) = &outbox else {
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                        continue;
+                    };
                     let ok = outbox.send(TherapistCommand {
                         header: node_shell::header_now(),
                         command: TherapistCommand::PAUSE,
@@ -433,8 +615,10 @@ fn run_role(role: &str) {
                     }
                     tokio::time::sleep(Duration::from_millis(200)).await;
                 }
-                println!("SENT {sent}");
-                drop(outbox);
+                if outbox.is_some() {
+                    println!("SENT {sent}");
+                }
+                drop((outbox, engagement));
             }
             other => panic!("unknown role {other}"),
         }
