@@ -111,6 +111,30 @@ fn train_writes_a_q_table_that_show_q_table_reads() {
         "--force",
     );
     assert_eq!(std::fs::read(&file).expect("read"), before);
+    // Not even with --force while a node runs on that directory (its lock, held here by this
+    // process): the node would overwrite the new table with its own.
+    let _running_node = node_shell::instance_lock::InstanceLock::acquire(
+        dir.path(),
+        "behaviour_policy",
+        "Q-tables",
+    )
+    .expect("free");
+    fails(
+        &[
+            "train",
+            "--per-level-reference",
+            "--cluster",
+            "1",
+            "--output",
+            path(&file),
+            "--force",
+        ],
+        &format!(
+            "is in use by another behaviour_policy (pid {})",
+            std::process::id()
+        ),
+    );
+    assert_eq!(std::fs::read(&file).expect("read"), before);
 }
 
 #[test]

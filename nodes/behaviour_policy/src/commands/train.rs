@@ -8,9 +8,10 @@ use anyhow::{Context, bail};
 use behaviour_policy::experiments::{EpochScheme, Run, RunSpec, best_run, train_run};
 use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
 use behaviour_policy::{Mode, QTable, QTableFile, QTableOwner, Reward};
+use node_shell::instance_lock::InstanceLock;
 use rayon::prelude::*;
 use sequence_game::UserModelTable;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
@@ -94,6 +95,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Some(p) => p.clone(),
         None => PathBuf::from("out/q_tables").join(owner.file_name()?),
     };
+    // A node running on that directory would overwrite the table with its own at its next
+    // update: refuse before training rather than lose the result.
+    let dir = output
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let _dir_lock = InstanceLock::acquire(dir, "behaviour_policy", "Q-tables")
+        .with_context(|| format!("writing {}", output.display()))?;
     if output.exists() && !a.force {
         bail!(
             "{} exists (it may hold what real sessions taught): pass --force to replace it",
