@@ -90,16 +90,20 @@ impl InstanceLock {
 
 /// The process holding a `flock` on `dir`, from `/proc/locks` (Linux), for the error message
 /// only. Lines read `1: FLOCK  ADVISORY  WRITE 1234 fd:01:5678 0 EOF`: the pid, then the
-/// device and inode.
+/// device (major:minor, hex) and the inode.
 fn holder(dir: &Path) -> Option<u32> {
     use std::os::unix::fs::MetadataExt;
-    let inode = std::fs::metadata(dir).ok()?.ino();
+    let meta = std::fs::metadata(dir).ok()?;
+    // glibc's major()/minor() of a dev_t.
+    let dev = meta.dev();
+    let major = ((dev >> 8) & 0xfff) | ((dev >> 32) & !0xfff);
+    let minor = (dev & 0xff) | ((dev >> 12) & !0xff);
+    let file = format!("{major:02x}:{minor:02x}:{}", meta.ino());
     let locks = std::fs::read_to_string("/proc/locks").ok()?;
     locks.lines().find_map(|line| {
         let fields: Vec<&str> = line.split_whitespace().collect();
-        let (kind, pid, file) = (fields.get(1)?, fields.get(4)?, fields.get(5)?);
-        let file_inode: u64 = file.rsplit(':').next()?.parse().ok()?;
-        (*kind == "FLOCK" && file_inode == inode)
+        let (kind, pid, locked) = (fields.get(1)?, fields.get(4)?, fields.get(5)?);
+        (*kind == "FLOCK" && *locked == file)
             .then(|| pid.parse().ok())
             .flatten()
     })
