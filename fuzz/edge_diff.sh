@@ -16,10 +16,7 @@ seeds=()
 BIN=${BIN:+$(realpath "$BIN")}
 cd "$(dirname "$0")"
 source ./libfuzzer_flags.sh
-bin=${BIN:-target/$triple/release/$t}
-[ -x "$bin" ] || { echo "$bin missing: build it with fuzz/run.sh 0 $t" >&2; exit 2; }
-# The same pattern as stable_edges.sh: serde-saphyr's duplicate-key maps under std's hasher.
-hash_seeded='hashbrown::(map::HashMap|raw::RawTable)<\(?(serde_saphyr::de::key_nodes::KeyFingerprint|usize), \(\)|KeyFingerprint as core::cmp::PartialEq>::eq'
+source ./stable_functions.sh "$t"
 
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

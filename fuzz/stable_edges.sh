@@ -23,10 +23,7 @@ set -- "${dirs[@]}"
 BIN=${BIN:+$(realpath "$BIN")}
 cd "$(dirname "$0")"
 source ./libfuzzer_flags.sh
-# BIN=path: another build of the target (e.g. a copy of the binary a run used).
-bin=${BIN:-target/$triple/release/$t}
-[ -x "$bin" ] || { echo "$bin missing: build it with fuzz/run.sh 0 $t" >&2; exit 2; }
-hash_seeded='hashbrown::(map::HashMap|raw::RawTable)<\(?(serde_saphyr::de::key_nodes::KeyFingerprint|usize), \(\)|KeyFingerprint as core::cmp::PartialEq>::eq'
+source ./stable_functions.sh "$t"
 
 out=$(mktemp)
 trap 'rm -f "$out"' EXIT

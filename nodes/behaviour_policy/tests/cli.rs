@@ -99,17 +99,15 @@ fn train_writes_a_q_table_that_show_q_table_reads() {
     assert!(table.contains("(L=0, F=0, PS=+0)"), "{table}");
     // An existing table (maybe taught by real sessions) is not replaced without --force.
     let before = std::fs::read(&file).expect("read");
-    fails(
-        &[
-            "train",
-            "--per-level-reference",
-            "--cluster",
-            "1",
-            "--output",
-            path(&file),
-        ],
-        "--force",
-    );
+    let retrain = [
+        "train",
+        "--per-level-reference",
+        "--cluster",
+        "1",
+        "--output",
+        path(&file),
+    ];
+    fails(&retrain, "--force");
     assert_eq!(std::fs::read(&file).expect("read"), before);
     // Not even with --force while a node runs on that directory (its lock, held here by this
     // process): the node would overwrite the new table with its own.
@@ -120,15 +118,7 @@ fn train_writes_a_q_table_that_show_q_table_reads() {
     )
     .expect("free");
     fails(
-        &[
-            "train",
-            "--per-level-reference",
-            "--cluster",
-            "1",
-            "--output",
-            path(&file),
-            "--force",
-        ],
+        &[&retrain[..], &["--force"]].concat(),
         &format!(
             "is in use by another behaviour_policy (pid {})",
             std::process::id()

@@ -1,0 +1,8 @@
+# Sourced by fuzz/stable_edges.sh and fuzz/edge_diff.sh (after libfuzzer_flags.sh, from fuzz/):
+# the fuzz binary of target $1 (BIN=FILE picks another build, e.g. a copy of the binary a run
+# used; default: the one fuzz/run.sh built last), and the functions whose edges the hash seed
+# decides: serde-saphyr's duplicate-key maps under std's randomly seeded hasher, and
+# KeyFingerprint::eq (stable_edges.sh says why).
+bin=${BIN:-target/$triple/release/$1}
+[ -x "$bin" ] || { echo "$bin missing: build it with fuzz/run.sh 0 $1" >&2; exit 2; }
+hash_seeded='hashbrown::(map::HashMap|raw::RawTable)<\(?(serde_saphyr::de::key_nodes::KeyFingerprint|usize), \(\)|KeyFingerprint as core::cmp::PartialEq>::eq'
