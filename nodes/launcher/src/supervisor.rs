@@ -22,6 +22,9 @@ enum Event {
     Respawn(String),
 }
 
+/// How long the output of a process that exited is still read before its exit is reported.
+const OUTPUT_DRAIN: Duration = Duration::from_secs(1);
+
 fn say(text: &str) {
     eprintln!("[launch] {text}");
 }
@@ -42,26 +45,36 @@ fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::R
     let mut child: Child = cmd.spawn()?;
     let pid = child.id().unwrap_or(0);
     let name = spec.name.clone();
+    let mut forwarders = Vec::new();
     if let Some(out) = child.stdout.take() {
         let name = name.clone();
-        tokio::spawn(async move {
+        forwarders.push(tokio::spawn(async move {
             let mut lines = BufReader::new(out).lines();
             while let Ok(Some(line)) = lines.next_line().await {
                 println!("[{name}] {line}");
             }
-        });
+        }));
     }
     if let Some(err) = child.stderr.take() {
         let name = name.clone();
-        tokio::spawn(async move {
+        forwarders.push(tokio::spawn(async move {
             let mut lines = BufReader::new(err).lines();
             while let Ok(Some(line)) = lines.next_line().await {
                 eprintln!("[{name}] {line}");
             }
-        });
+        }));
     }
     tokio::spawn(async move {
         let status = child.wait().await;
+        // The exit can be seen before the last lines are read from the pipes; the launcher may
+        // exit on this event, so forward them first. Bounded, because a grandchild that
+        // inherited the pipes can keep them open after the node itself is gone.
+        let _ = tokio::time::timeout(OUTPUT_DRAIN, async {
+            for forwarder in forwarders {
+                let _ = forwarder.await;
+            }
+        })
+        .await;
         use std::os::unix::process::ExitStatusExt;
         let (code, signal) = match status {
             Ok(s) => (s.code(), s.signal()),

@@ -1,7 +1,8 @@
 //! The `launch` binary with plain shell commands as nodes (no DDS, so no namespace): output
-//! prefixed per node, a dying node reported and the launch's exit code set, a node that cannot
-//! start named while the others are stopped, and a broken launch file refused before anything
-//! starts.
+//! prefixed per node and forwarded before the node's exit is reported, a dying node reported
+//! and the launch's exit code set, a grandchild holding the output open not holding up the
+//! launch, a node that cannot start named while the others are stopped, and a broken launch
+//! file refused before anything starts.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -44,12 +45,36 @@ fn output_is_prefixed_per_node_and_a_dying_node_sets_the_exit_code() {
         stdout.lines().any(|l| l == "[second] second done"),
         "{context}"
     );
-    assert!(stderr.lines().any(|l| l == "[first] oops"), "{context}");
+    // A node's last lines come before the report of its exit (which can end the launch).
+    let oops = stderr.find("[first] oops");
+    let died = stderr.find("[launch] first died (exit code 3)");
+    assert!(oops.is_some() && died.is_some() && oops < died, "{context}");
+    assert!(stderr.contains("[launch] second finished"), "{context}");
+}
+
+#[test]
+fn a_grandchild_holding_the_output_open_does_not_hold_up_the_launch() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let started = std::time::Instant::now();
+    let out = launch(
+        dir.path(),
+        "launch:\n\
+         - executable:\n    cmd: sh -c 'sleep 20 & echo parent done'\n    name: parent\n",
+    );
+    let (stdout, stderr) = text(&out);
+    let context = format!("stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{context}");
     assert!(
-        stderr.contains("[launch] first died (exit code 3)"),
+        stdout.lines().any(|l| l == "[parent] parent done"),
         "{context}"
     );
-    assert!(stderr.contains("[launch] second finished"), "{context}");
+    assert!(stderr.contains("[launch] parent finished"), "{context}");
+    // The sleeping grandchild keeps the pipe open for 20 s; the launch is over long before.
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(15),
+        "took {:?}\n{context}",
+        started.elapsed()
+    );
 }
 
 #[test]
