@@ -491,9 +491,7 @@ impl NodeShell {
         client: &ServiceClient<S>,
         timeout: Duration,
     ) -> bool {
-        tokio::time::timeout(timeout, client.client.wait_for_service(&self.node))
-            .await
-            .is_ok()
+        wait_rechecking(timeout, || client.client.wait_for_service(&self.node)).await
     }
 
     /// Resolves when SIGINT or SIGTERM arrives.
@@ -602,10 +600,10 @@ impl<M: Message + Serialize + std::fmt::Debug> Outbox<M> {
     /// Waits until a subscriber is matched (then a short settle, since the remote side may
     /// match us a moment later), or `timeout` passes; true if matched.
     pub async fn wait_for_subscribers(&self, shell: &NodeShell, timeout: Duration) -> bool {
-        let matched =
-            tokio::time::timeout(timeout, self.publisher.wait_for_subscription(&shell.node))
-                .await
-                .is_ok();
+        let matched = wait_rechecking(timeout, || {
+            self.publisher.wait_for_subscription(&shell.node)
+        })
+        .await;
         if matched {
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
@@ -683,6 +681,36 @@ impl<S: ServiceDefinition> ServiceClient<S> {
 #[serde(deny_unknown_fields)]
 pub struct NoParameters {}
 
+/// How often a wait for a match starts again (see [`wait_rechecking`]).
+const MATCH_RECHECK: Duration = Duration::from_millis(200);
+
+/// Runs `wait` (one of ros2-client's waits for a match) until it resolves or `timeout` passes,
+/// starting it anew every [`MATCH_RECHECK`]; true if it resolved. ros2-client's waits look at
+/// the match state when they start, then only when a discovery event reaches them, through a
+/// channel of 8 that drops events when full. A node joining a whole graph gets a burst of
+/// them, so the one that matters can be dropped and the wait then runs its whole timeout: a
+/// respawned game manager waited its 10 s for a running policy in 1 of 10 kill-test runs. A
+/// new wait checks the state first, so a dropped event costs at most one recheck.
+async fn wait_rechecking<F, W>(timeout: Duration, mut wait: F) -> bool
+where
+    F: FnMut() -> W,
+    W: std::future::Future<Output = ()>,
+{
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+        if left.is_zero() {
+            return false;
+        }
+        if tokio::time::timeout(left.min(MATCH_RECHECK), wait())
+            .await
+            .is_ok()
+        {
+            return true;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::{domain_id_from, localhost_only_from};
@@ -712,5 +740,51 @@ mod tests {
         assert!(localhost_only_from(None, Some("LOCALHOST")));
         assert!(localhost_only_from(Some("0"), Some("localhost")));
         assert!(!localhost_only_from(None, Some("SUBNET")));
+    }
+
+    /// A wait that checks the state only when it starts, as ros2-client's does once its
+    /// event was dropped: it resolves if `matched` is set by then, else never.
+    fn wait_missing_its_event(
+        matched: &std::sync::atomic::AtomicBool,
+    ) -> std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>> {
+        if matched.load(std::sync::atomic::Ordering::SeqCst) {
+            Box::pin(std::future::ready(()))
+        } else {
+            Box::pin(std::future::pending())
+        }
+    }
+
+    #[tokio::test]
+    async fn a_match_whose_event_was_dropped_is_seen_at_the_next_recheck() {
+        let matched = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let set = matched.clone();
+        tokio::spawn(async move {
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            set.store(true, std::sync::atomic::Ordering::SeqCst);
+        });
+        let started = std::time::Instant::now();
+        let found = super::wait_rechecking(std::time::Duration::from_secs(30), || {
+            wait_missing_its_event(&matched)
+        })
+        .await;
+        assert!(found);
+        // One recheck after the match, not the 30 s timeout.
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(10),
+            "{:?}",
+            started.elapsed()
+        );
+    }
+
+    #[tokio::test]
+    async fn no_match_waits_the_whole_timeout_and_says_so() {
+        let matched = std::sync::atomic::AtomicBool::new(false);
+        let started = std::time::Instant::now();
+        let found = super::wait_rechecking(std::time::Duration::from_millis(500), || {
+            wait_missing_its_event(&matched)
+        })
+        .await;
+        assert!(!found);
+        assert!(started.elapsed() >= std::time::Duration::from_millis(500));
     }
 }
