@@ -17,12 +17,20 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
         P={probe}; export ROS_LOCALHOST_ONLY=1
         $P --params-file tests/params/dds_probe.yaml responder >{d}/responder.out 2>{d}/responder.err &
         R=$!
-        $P --params-file tests/params/dds_probe.yaml caller --count 5 >{d}/caller.out 2>{d}/caller.err
-        C=$?
-        # Wait (at most 10 s) for the five valid answers to have been printed, then stop.
-        for i in $(seq 100); do [ "$(grep -c '"answer"' {d}/responder.out)" -ge 5 ] && break; sleep 0.1; done
+        $P --params-file tests/params/dds_probe.yaml caller --count 5 >{d}/caller.out 2>{d}/caller.err &
+        C=$!
+        # The caller stays until stopped, so that what it sent is delivered (repeated if lost):
+        # wait (at most 30 s) for it to be done, the five valid answers and the three kinds of
+        # drop to have been printed, or for the caller to have failed; then stop both.
+        for i in $(seq 300); do
+          kill -0 $C 2>/dev/null || break
+          grep -q '"done"' {d}/caller.out && [ "$(grep -c '"answer"' {d}/responder.out)" -ge 5 ] &&
+            [ "$(grep -c 'dropped a message.*tablet/answer' {d}/responder.err)" -ge 3 ] && break
+          sleep 0.1
+        done
         # SIGTERM here (the launcher and the other DDS tests stop nodes with SIGINT): both end a
         # node cleanly, with exit code 0.
+        kill -TERM $C; wait $C; C=$?
         kill -TERM $R; wait $R; RC=$?
         echo "{{\"event\":\"exit\",\"caller\":$C,\"responder\":$RC}}"
         "#

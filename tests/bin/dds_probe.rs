@@ -1,6 +1,6 @@
 //! A DDS peer for the cross-process tests. `responder` subscribes to the tablet answers and
-//! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable) and
-//! calls the service; `logger` logs lines (to `/rosout` through the shell) and `rosout-reader`
+//! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable),
+//! calls the service and stays until stopped; `logger` logs lines (to `/rosout` through the shell) and `rosout-reader`
 //! prints the `/rosout` records it receives. Each prints one JSON line per event, so a test
 //! can check what crossed.
 
@@ -24,7 +24,9 @@ struct Cli {
 enum Role {
     /// Print every valid TabletAnswer and answer PredictUser until SIGINT/SIGTERM.
     Responder,
-    /// Publish `count` answers plus bad ones, call PredictUser, then exit.
+    /// Publish `count` answers plus bad ones, call PredictUser, print `done`, then stay until
+    /// SIGINT/SIGTERM: a reliable sample lost on the way is sent again only while its writer
+    /// lives, so a caller exiting at once lost its last answers in 1 of 10 runs.
     Caller {
         #[arg(long, default_value_t = 5)]
         count: u32,
@@ -52,7 +54,11 @@ async fn main() -> anyhow::Result<()> {
     let (mut shell, NoParameters {}) = NodeShell::start("dds_probe", &cli.shell)?;
     match cli.role {
         Role::Responder => responder(&mut shell).await?,
-        Role::Caller { count } => caller(&mut shell, count).await?,
+        Role::Caller { count } => {
+            caller(&mut shell, count).await?;
+            emit(serde_json::json!({"event": "done"}));
+            shell.shutdown_signal().await;
+        }
         Role::Logger { lines } => {
             for i in 1..=lines {
                 tracing::info!("rosout probe line {i}");
