@@ -17,7 +17,7 @@ fn topic_and_service_cross_process_boundaries_and_bad_input_is_dropped() {
         P={probe}; export ROS_LOCALHOST_ONLY=1
         $P --params-file tests/params/dds_probe.yaml responder >{d}/responder.out 2>{d}/responder.err &
         R=$!
-        $P --params-file tests/params/dds_probe.yaml caller --count 5 >{d}/caller.out 2>{d}/caller.err &
+        $P --params-file tests/params/dds_probe.yaml caller --count 5 --linger 60 >{d}/caller.out 2>{d}/caller.err &
         C=$!
         # The caller stays until stopped, so that what it sent is delivered (repeated if lost):
         # wait (at most 30 s) for it to be done, the five valid answers and the three kinds of

@@ -1,8 +1,8 @@
 //! A DDS peer for the cross-process tests. `responder` subscribes to the tablet answers and
 //! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable),
-//! calls the service and stays until stopped; `logger` logs lines (to `/rosout` through the shell) and `rosout-reader`
-//! prints the `/rosout` records it receives. Each prints one JSON line per event, so a test
-//! can check what crossed.
+//! calls the service and lingers; `logger` logs lines (to `/rosout` through the shell) and
+//! `rosout-reader` prints the `/rosout` records it receives. Each prints one JSON line per
+//! event, so a test can check what crossed.
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -24,12 +24,15 @@ struct Cli {
 enum Role {
     /// Print every valid TabletAnswer and answer PredictUser until SIGINT/SIGTERM.
     Responder,
-    /// Publish `count` answers plus bad ones, call PredictUser, print `done`, then stay until
-    /// SIGINT/SIGTERM: a reliable sample lost on the way is sent again only while its writer
-    /// lives, so a caller exiting at once lost its last answers in 1 of 10 runs.
+    /// Publish `count` answers plus bad ones, call PredictUser, print `done`, then stay for
+    /// `linger` seconds or until SIGINT/SIGTERM: a reliable sample lost on the way is sent again
+    /// only while its writer lives (RustDDS's heartbeat comes every second), so a caller
+    /// exiting at once lost its last answers in 1 of 10 runs.
     Caller {
         #[arg(long, default_value_t = 5)]
         count: u32,
+        #[arg(long, default_value_t = 2.0)]
+        linger: f64,
     },
     /// Log `lines` INFO lines "rosout probe line N", print `logged`, then idle until SIGINT.
     Logger {
@@ -54,10 +57,14 @@ async fn main() -> anyhow::Result<()> {
     let (mut shell, NoParameters {}) = NodeShell::start("dds_probe", &cli.shell)?;
     match cli.role {
         Role::Responder => responder(&mut shell).await?,
-        Role::Caller { count } => {
+        Role::Caller { count, linger } => {
             caller(&mut shell, count).await?;
             emit(serde_json::json!({"event": "done"}));
-            shell.shutdown_signal().await;
+            let linger = Duration::try_from_secs_f64(linger).context("--linger")?;
+            tokio::select! {
+                _ = tokio::time::sleep(linger) => {}
+                _ = shell.shutdown_signal() => {}
+            }
         }
         Role::Logger { lines } => {
             for i in 1..=lines {
