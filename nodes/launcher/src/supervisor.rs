@@ -47,21 +47,13 @@ fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::R
     let name = spec.name.clone();
     let mut forwarders = Vec::new();
     if let Some(out) = child.stdout.take() {
-        let name = name.clone();
-        forwarders.push(tokio::spawn(async move {
-            let mut lines = BufReader::new(out).lines();
-            while let Ok(Some(line)) = lines.next_line().await {
-                println!("[{name}] {line}");
-            }
+        forwarders.push(forward_lines(out, name.clone(), |name, line| {
+            println!("[{name}] {line}")
         }));
     }
     if let Some(err) = child.stderr.take() {
-        let name = name.clone();
-        forwarders.push(tokio::spawn(async move {
-            let mut lines = BufReader::new(err).lines();
-            while let Ok(Some(line)) = lines.next_line().await {
-                eprintln!("[{name}] {line}");
-            }
+        forwarders.push(forward_lines(err, name.clone(), |name, line| {
+            eprintln!("[{name}] {line}")
         }));
     }
     tokio::spawn(async move {
@@ -83,6 +75,19 @@ fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::R
         let _ = events.send(Event::Exited { name, code, signal });
     });
     Ok(pid)
+}
+
+/// Prints each line of a node's output pipe, prefixed by its name, until the pipe closes.
+fn forward_lines<R>(pipe: R, name: String, print: fn(&str, &str)) -> tokio::task::JoinHandle<()>
+where
+    R: tokio::io::AsyncRead + Unpin + Send + 'static,
+{
+    tokio::spawn(async move {
+        let mut lines = BufReader::new(pipe).lines();
+        while let Ok(Some(line)) = lines.next_line().await {
+            print(&name, &line);
+        }
+    })
 }
 
 fn describe(code: Option<i32>, signal: Option<i32>) -> String {

@@ -714,6 +714,11 @@ where
 #[cfg(test)]
 mod tests {
     use super::{domain_id_from, localhost_only_from};
+    use std::future::Future;
+    use std::pin::Pin;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant};
 
     #[test]
     fn ros_domain_id_is_read_as_ros_2_does_and_nonsense_is_named() {
@@ -744,10 +749,8 @@ mod tests {
 
     /// A wait that checks the state only when it starts, as ros2-client's does once its
     /// event was dropped: it resolves if `matched` is set by then, else never.
-    fn wait_missing_its_event(
-        matched: &std::sync::atomic::AtomicBool,
-    ) -> std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>> {
-        if matched.load(std::sync::atomic::Ordering::SeqCst) {
+    fn wait_missing_its_event(matched: &AtomicBool) -> Pin<Box<dyn Future<Output = ()> + Send>> {
+        if matched.load(Ordering::SeqCst) {
             Box::pin(std::future::ready(()))
         } else {
             Box::pin(std::future::pending())
@@ -756,21 +759,20 @@ mod tests {
 
     #[tokio::test]
     async fn a_match_whose_event_was_dropped_is_seen_at_the_next_recheck() {
-        let matched = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let matched = Arc::new(AtomicBool::new(false));
         let set = matched.clone();
         tokio::spawn(async move {
-            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
-            set.store(true, std::sync::atomic::Ordering::SeqCst);
+            tokio::time::sleep(Duration::from_millis(50)).await;
+            set.store(true, Ordering::SeqCst);
         });
-        let started = std::time::Instant::now();
-        let found = super::wait_rechecking(std::time::Duration::from_secs(30), || {
-            wait_missing_its_event(&matched)
-        })
-        .await;
+        let started = Instant::now();
+        let found =
+            super::wait_rechecking(Duration::from_secs(30), || wait_missing_its_event(&matched))
+                .await;
         assert!(found);
         // One recheck after the match, not the 30 s timeout.
         assert!(
-            started.elapsed() < std::time::Duration::from_secs(10),
+            started.elapsed() < Duration::from_secs(10),
             "{:?}",
             started.elapsed()
         );
@@ -778,13 +780,13 @@ mod tests {
 
     #[tokio::test]
     async fn no_match_waits_the_whole_timeout_and_says_so() {
-        let matched = std::sync::atomic::AtomicBool::new(false);
-        let started = std::time::Instant::now();
-        let found = super::wait_rechecking(std::time::Duration::from_millis(500), || {
+        let matched = AtomicBool::new(false);
+        let started = Instant::now();
+        let found = super::wait_rechecking(Duration::from_millis(500), || {
             wait_missing_its_event(&matched)
         })
         .await;
         assert!(!found);
-        assert!(started.elapsed() >= std::time::Duration::from_millis(500));
+        assert!(started.elapsed() >= Duration::from_millis(500));
     }
 }
