@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Fuzzes the suite's input formats with libFuzzer the way `cargo fuzz run TARGET` would (same
 # instrumentation flags, nightly, AddressSanitizer), for machines without cargo-fuzz.
-#   fuzz/run.sh [SECONDS_PER_TARGET] [TARGET...]      (default 300 s, every target)
+#   fuzz/run.sh [SECONDS_PER_TARGET] [TARGET...]      (default 300 s, every target; 0 builds only)
 # Targets: msg_decode user_model_file q_table_file xgboost_model params_file launch_file
 # tablet_ws. Each runs in turn (nice -n 10); its corpus grows in corpus/TARGET (kept in the
 # repository) from the seeds in target/seeds.<pid>/TARGET (generated, plus the repository's own
@@ -12,6 +12,11 @@
 # (smallest first) that still reaches every coverage edge (libFuzzer -merge=1 -use_counters=0; hit
 # counts are dropped, which keeps the kept corpora small). The seeds stay out of it: every run
 # regenerates them.
+# SANITIZER=none fuzz/run.sh ...  without AddressSanitizer (libfuzzer_flags.sh says why), in
+# its own build (target/sanitizer-none); several times the executions per second.
+# REPLAY=1 fuzz/run.sh 0 TARGET  runs every input of corpus/TARGET once and stops at the first
+# crash, leak or timeout: under ASan (the default build) after a SANITIZER=none run, so what a
+# faster run found still meets the memory checks.
 set -euo pipefail
 cd "$(dirname "$0")"
 secs=${1:-300}
@@ -21,15 +26,24 @@ if [ ${#targets[@]} -eq 0 ]; then
   targets=(msg_decode user_model_file q_table_file xgboost_model params_file launch_file tablet_ws)
 fi
 source ./libfuzzer_flags.sh
-export CARGO_TARGET_DIR="$PWD/target"
-nice -n 10 cargo +nightly build --release --target "$triple" --bins
-bin="target/$triple/release"
+# Some binaries always come from the default (ASan) build: make_seeds, which is no fuzz target
+# and finds the coverage callbacks its instrumented code calls only in ASan's runtime (without
+# it, it fails to link), and with STABLE=1 the targets that count the stable edges
+# (stable_functions.sh says why).
+default_bins=(--bin=make_seeds)
+[ "${STABLE:-0}" = 1 ] && default_bins+=("${targets[@]/#/--bin=}")
+(SANITIZER=address && source ./libfuzzer_flags.sh &&
+  CARGO_TARGET_DIR="$PWD/$build_dir" nice -n 10 cargo +nightly build --release --target "$triple" \
+    "${default_bins[@]}")
+export CARGO_TARGET_DIR="$PWD/$build_dir"
+nice -n 10 cargo +nightly build --release --target "$triple" "${targets[@]/#/--bin=}"
+bin="$build_dir/$triple/release"
 
 # Generated seeds, then the repository's real files of each format: one directory per run, so
 # runs side by side (two targets on two cores) never delete each other's seeds.
 seeds=target/seeds.$$
 trap 'rm -rf "$seeds"' EXIT
-"$bin/make_seeds" "$seeds"
+"target/$triple/release/make_seeds" "$seeds"
 add() { local dir="$seeds/$1"; shift; mkdir -p "$dir"; for f in "$@"; do
   [ -f "$f" ] && cp "$f" "$dir/$(echo "${f#../}" | tr / _)"; done; return 0; }
 add params_file ../params/*.yaml ../tests/params/*.yaml
@@ -61,29 +75,27 @@ write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- 
   "\$(var " "\$(env " "\$(find-pkg-share " "\$(" ")" "'" "\"" true false True False \
   screen log both shutdown
 
-# Largest input per target: room for the model files seeded.
-max_len() { case $1 in
-  user_model_file) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;
-  *) echo 8192 ;; esac; }
-
 # PLATEAU=S: stop a target once its edge coverage ("cov:" in libFuzzer's status lines, not
 # the slowly growing "ft:" features) has not grown for S seconds: a plateau, written to the log.
 # STABLE=1 with it: count the edges with stable_edges.sh every S seconds instead (the corpus
-# and seeds run once by the same binary, leaving out the edges the hash seed decides), and
-# stop when one count is no higher than the one before. For the YAML targets, whose "cov:"
-# moves by chance (stable_edges.sh says why).
+# and seeds run once by the default build's binary, leaving out the edges the hash seed
+# decides), and stop when one count is no higher than the one before. For the YAML targets,
+# whose "cov:" moves by chance (stable_edges.sh says why).
 stable_count() {
-  BIN="$bin/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
+  BIN="target/$triple/release/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
     sed -n 's/.*: \([0-9]*\) stable edges.*/\1/p'
 }
 watch_plateau() {
-  local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov pid
+  local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov pid waited
   sleep 5
   pid=$(pgrep -n -f "release/$t " || true)
   if [ "${STABLE:-0}" = 1 ]; then
     while [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; do
-      sleep "$quiet"
-      kill -0 "$pid" 2>/dev/null || return 0
+      # In steps, so a fuzzer that ends (its time is up) is not waited on for a whole interval.
+      for ((waited = 0; waited < quiet; waited += 10)); do
+        sleep 10
+        kill -0 "$pid" 2>/dev/null || return 0
+      done
       cov=$(stable_count "$t" || true)
       [ -n "$cov" ] || continue
       echo "=== $t: $cov stable edges after $((SECONDS - since)) s" | tee -a "$log"
@@ -117,6 +129,14 @@ for t in "${targets[@]}"; do
     rm -rf "corpus/$t" && mv "target/merged/$t" "corpus/$t"
     continue
   fi
+  if [ "${REPLAY:-0}" = 1 ]; then
+    echo "=== $t: replaying $(find "corpus/$t" -type f | wc -l) inputs (SANITIZER=${SANITIZER:-address})"
+    nice -n 10 "$bin/$t" -runs=0 -timeout=10 -rss_limit_mb=2048 -artifact_prefix="artifacts/$t/" \
+      "corpus/$t"
+    echo "=== $t: every input ran, no crash"
+    continue
+  fi
+  if [ "$secs" = 0 ]; then echo "=== $t: built, $bin/$t"; continue; fi
   echo "=== $t: $secs s${PLATEAU:+, or until no new edge for $PLATEAU s}"
   log="target/fuzz-$t.log"
   dict=()

@@ -6,6 +6,9 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 secs=${1:-600}
+# Always with AddressSanitizer: the reader is fuzzed short enough for its cost, and this
+# crate's make_seeds links only beside ASan's runtime (fuzz/run.sh says why).
+SANITIZER=address
 source ../../../fuzz/libfuzzer_flags.sh
 export CARGO_TARGET_DIR="$PWD/target"
 cargo +nightly build --release --target "$triple" --bins
