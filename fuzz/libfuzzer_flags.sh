@@ -17,6 +17,9 @@ export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4
 -Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \
 -Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing -Cdebug-assertions \
 -Coverflow-checks$asan"
+# The default (ASan) build's binaries, which some work needs whatever SANITIZER says (run.sh
+# and stable_functions.sh say why).
+default_bin_dir=target/$triple/release
 # Largest input per target (libFuzzer -max_len): room for the model files seeded.
 max_len() { case $1 in
   user_model_file) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;

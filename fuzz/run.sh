@@ -38,12 +38,16 @@ default_bins=(--bin=make_seeds)
 export CARGO_TARGET_DIR="$PWD/$build_dir"
 nice -n 10 cargo +nightly build --release --target "$triple" "${targets[@]/#/--bin=}"
 bin="$build_dir/$triple/release"
+if [ "$secs" = 0 ] && [ "${MERGE:-0}" != 1 ] && [ "${REPLAY:-0}" != 1 ]; then
+  for t in "${targets[@]}"; do echo "=== $t: built, $bin/$t"; done
+  exit 0
+fi
 
 # Generated seeds, then the repository's real files of each format: one directory per run, so
 # runs side by side (two targets on two cores) never delete each other's seeds.
 seeds=target/seeds.$$
 trap 'rm -rf "$seeds"' EXIT
-"target/$triple/release/make_seeds" "$seeds"
+"$default_bin_dir/make_seeds" "$seeds"
 add() { local dir="$seeds/$1"; shift; mkdir -p "$dir"; for f in "$@"; do
   [ -f "$f" ] && cp "$f" "$dir/$(echo "${f#../}" | tr / _)"; done; return 0; }
 add params_file ../params/*.yaml ../tests/params/*.yaml
@@ -82,7 +86,7 @@ write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- 
 # decides), and stop when one count is no higher than the one before. For the YAML targets,
 # whose "cov:" moves by chance (stable_edges.sh says why).
 stable_count() {
-  BIN="target/$triple/release/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
+  BIN="$default_bin_dir/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
     sed -n 's/.*: \([0-9]*\) stable edges.*/\1/p'
 }
 watch_plateau() {
@@ -136,7 +140,6 @@ for t in "${targets[@]}"; do
     echo "=== $t: every input ran, no crash"
     continue
   fi
-  if [ "$secs" = 0 ]; then echo "=== $t: built, $bin/$t"; continue; fi
   echo "=== $t: $secs s${PLATEAU:+, or until no new edge for $PLATEAU s}"
   log="target/fuzz-$t.log"
   dict=()

@@ -5,7 +5,7 @@
 # KeyFingerprint::eq (stable_edges.sh says why). Always a sanitizer build: -print_coverage names
 # the covered functions with the sanitizer runtime's symbolizer, and a SANITIZER=none build
 # has none, so it would print no function and count 0.
-bin=${BIN:-target/$triple/release/$1}
+bin=${BIN:-$default_bin_dir/$1}
 [ -x "$bin" ] || { echo "$bin missing: build it with fuzz/run.sh 0 $1" >&2; exit 2; }
 nm "$bin" | grep ' T __sanitizer_symbolize_pc' >/dev/null || {
   echo "$bin has no sanitizer runtime to name covered functions (a SANITIZER=none build?):" \
