@@ -7,7 +7,8 @@
 //!
 //! Heartbeats are matched by node name, so two processes beating under one name (a node started
 //! twice) would look like one node restarting again and again; a pid that comes back within
-//! the timeout after it was replaced is told as such, once per pair.
+//! the timeout after it was replaced is told as such, once per pair, and [`HeartbeatWatch::twins`]
+//! names such pairs for as long as both still beat, so a caller can show it until one stops.
 //!
 //! Watching starts with the first heartbeat from any watched node: a core that hears none (a
 //! replay, a unit test) watches nothing, and from then on a node never heard is lost one
@@ -35,8 +36,35 @@ struct Watched {
     lost_since: Option<i64>,
     /// The pid its last new pid replaced, and when.
     replaced: Option<(u32, i64)>,
-    /// Two pids found beating together (smaller first), told once.
-    twice: Option<(u32, u32)>,
+    /// Two pids found beating together, told once.
+    twice: Option<Pair>,
+}
+
+/// Two processes beating under one name, and when each last did.
+#[derive(Debug, Clone)]
+struct Pair {
+    /// Smaller first.
+    pids: (u32, u32),
+    last_ns: (i64, i64),
+}
+
+impl Pair {
+    fn heard(&mut self, pid: u32, now_ns: i64) {
+        if pid == self.pids.0 {
+            self.last_ns.0 = now_ns;
+        } else if pid == self.pids.1 {
+            self.last_ns.1 = now_ns;
+        }
+    }
+}
+
+/// A name that two processes beat under, both within the timeout: found by
+/// [`HeartbeatWatch::twins`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Twins {
+    pub name: String,
+    /// Smaller first.
+    pub pids: (u32, u32),
 }
 
 /// What one heartbeat told.
@@ -125,7 +153,10 @@ impl HeartbeatWatch {
         };
         let silent_ns = now_ns.saturating_sub(w.last_ns);
         let old_pid = w.pid.replace(pid);
-        w.last_ns = now_ns;
+        let previous_ns = std::mem::replace(&mut w.last_ns, now_ns);
+        if let Some(pair) = w.twice.as_mut() {
+            pair.heard(pid, now_ns);
+        }
         if let Some(since) = w.lost_since.take() {
             let lost_for_ns = now_ns.saturating_sub(since);
             return Heard::Back {
@@ -140,10 +171,15 @@ impl HeartbeatWatch {
                     .replaced
                     .is_some_and(|(p, at)| p == pid && now_ns.saturating_sub(at) < self.timeout_ns);
                 w.replaced = Some((old_pid, now_ns));
-                let pair = (old_pid.min(pid), old_pid.max(pid));
-                if w.twice == Some(pair) {
+                let pids = (old_pid.min(pid), old_pid.max(pid));
+                if w.twice.as_ref().is_some_and(|p| p.pids == pids) {
                     Heard::Alive
                 } else if back_again {
+                    let mut pair = Pair {
+                        pids,
+                        last_ns: (now_ns, now_ns),
+                    };
+                    pair.heard(old_pid, previous_ns);
                     w.twice = Some(pair);
                     Heard::Twice { other_pid: old_pid }
                 } else {
@@ -193,6 +229,22 @@ impl HeartbeatWatch {
     /// True while `name` is lost.
     pub fn is_lost(&self, name: &str) -> bool {
         self.nodes.get(name).is_some_and(|w| w.lost_since.is_some())
+    }
+
+    /// The names two processes still beat under at `now_ns` (each heard within the timeout),
+    /// by name. A pair ends when one of them has been silent for the timeout.
+    pub fn twins(&self, now_ns: i64) -> Vec<Twins> {
+        let beating = |last: i64| now_ns.saturating_sub(last) < self.timeout_ns;
+        self.nodes
+            .iter()
+            .filter_map(|(name, w)| {
+                let p = w.twice.as_ref()?;
+                (beating(p.last_ns.0) && beating(p.last_ns.1)).then(|| Twins {
+                    name: name.clone(),
+                    pids: p.pids,
+                })
+            })
+            .collect()
     }
 
     /// How long `name` has been silent at `now_ns`: since its last heartbeat, or since the
@@ -298,11 +350,43 @@ mod tests {
             let pid = if i % 2 == 0 { 10 } else { 11 };
             assert_eq!(w.heartbeat("policy", pid, i * S / 10), Heard::Alive);
         }
+        let both = vec![Twins {
+            name: "policy".into(),
+            pids: (10, 11),
+        }];
+        assert_eq!(w.twins(39 * S / 10), both);
         // A third copy is news.
         assert_eq!(
             w.heartbeat("policy", 12, 4 * S),
             Heard::Restarted { old_pid: 11 }
         );
+    }
+
+    #[test]
+    fn twins_are_named_until_one_of_them_is_silent_for_the_timeout() {
+        let mut w = watch();
+        assert!(w.twins(0).is_empty());
+        w.heartbeat("policy", 10, 0);
+        w.heartbeat("policy", 11, S / 10);
+        assert!(w.twins(S / 10).is_empty(), "a restart is no pair");
+        w.heartbeat("policy", 10, 2 * S / 10);
+        let both = vec![Twins {
+            name: "policy".into(),
+            pids: (10, 11),
+        }];
+        assert_eq!(w.twins(2 * S / 10), both);
+        // Pid 11 stops after its beat at 0.3 s; 10 goes on.
+        w.heartbeat("policy", 11, 3 * S / 10);
+        for i in 4..60 {
+            w.heartbeat("policy", 10, i * S / 10);
+            let expected = if i * S / 10 < 3 * S / 10 + 4 * S {
+                both.clone()
+            } else {
+                vec![]
+            };
+            assert_eq!(w.twins(i * S / 10), expected, "at {i} tenths");
+        }
+        assert!(w.lost().is_empty(), "the one left beats");
     }
 
     #[test]

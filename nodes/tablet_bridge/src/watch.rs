@@ -4,11 +4,12 @@
 //! answer could reach no one); its first heartbeat again (a respawned node) says it is back.
 //! The robot needs nothing from here: without a game manager nothing commands it. The
 //! bookkeeping is the shared [`HeartbeatWatch`]'s: watching starts with the first heartbeat, so
-//! a bridge that never hears one (a replay) shows nothing.
+//! a bridge that never hears one (a replay) shows nothing. Two game managers beating (one
+//! started twice) stay on the therapist page's status until one of them stops.
 
 use crate::bridge::{Bridge, Now, Output};
 use crate::protocol::{GameView, Role, ServerMessage};
-use node_shell::heartbeat_watch::{Heard, HeartbeatWatch};
+use node_shell::heartbeat_watch::{Heard, HeartbeatWatch, Twins};
 use qt_therapy_msgs::{GameState, Heartbeat};
 use std::time::Duration;
 
@@ -21,6 +22,8 @@ pub(crate) struct GameManagerWatch {
     heartbeats: HeartbeatWatch,
     /// What the therapist page's status starts with while lost, or just after it came back.
     pub(crate) notice: Option<String>,
+    /// Two game manager processes beating, as last shown.
+    twins: Vec<Twins>,
 }
 
 impl GameManagerWatch {
@@ -29,6 +32,7 @@ impl GameManagerWatch {
         GameManagerWatch {
             heartbeats: HeartbeatWatch::with_timeout_s([GAME_MANAGER_NODE], timeout_s),
             notice: None,
+            twins: Vec::new(),
         }
     }
 
@@ -68,6 +72,7 @@ impl Bridge {
         );
         tracing::warn!("{notice}");
         w.notice = Some(notice);
+        w.twins = w.heartbeats.twins(nanos(now.monotonic));
         self.show_game(&mut out);
         out
     }
@@ -99,6 +104,12 @@ impl Bridge {
                 hb.pid
             ),
         }
+        let w = &mut self.gm_watch;
+        let twins = w.heartbeats.twins(nanos(now.monotonic));
+        if twins != w.twins {
+            w.twins = twins;
+            self.show_game(out);
+        }
     }
 
     /// The game view for the therapist page: the game manager's own, its status prefixed by
@@ -114,7 +125,13 @@ impl Bridge {
             (None, None) => return None,
         };
         let mut view = GameView::of(&g);
-        if let Some(n) = notice {
+        let twins = self.gm_watch.twins.first().map(|t| {
+            format!(
+                "two game managers beat (pids {} and {}): stop one",
+                t.pids.0, t.pids.1
+            )
+        });
+        for n in [notice, twins.as_ref()].into_iter().flatten() {
             view.status = if view.status.is_empty() {
                 n.clone()
             } else {

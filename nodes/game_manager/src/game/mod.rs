@@ -22,7 +22,7 @@ use crate::scoring::EngagementLog;
 use crate::sequence::SessionRng;
 use crate::session_file::SessionEnd;
 use crate::utterances::{RobotAct, Utterances};
-use node_shell::heartbeat_watch::HeartbeatWatch;
+use node_shell::heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
@@ -153,6 +153,8 @@ pub struct GameManager {
     watched: HeartbeatWatch,
     /// The heartbeat watchdog's timer id, while one is set.
     watchdog: Option<u64>,
+    /// Watched names two processes beat under (a node started twice), as last shown.
+    twins: Vec<Twins>,
     status: String,
     out: Vec<Output>,
 }
@@ -177,6 +179,7 @@ impl GameManager {
             next_request_id: 1,
             watched,
             watchdog: None,
+            twins: Vec::new(),
             status: "waiting for a therapist to start a session".into(),
             out: Vec::new(),
         })
@@ -304,13 +307,15 @@ impl GameManager {
             }
         };
         let plan = self.current.plan.as_ref();
-        // Which node is lost stays in view whatever else happens meanwhile.
+        // Which node is lost, or started twice, stays in view whatever else happens meanwhile.
         let lost = self.lost_names();
-        let status = if lost.is_empty() {
-            self.status.clone()
-        } else {
-            format!("node lost: {lost}; {}", self.status)
-        };
+        let mut status = self.status.clone();
+        if !self.twins.is_empty() {
+            status = format!("{}; {status}", self.twins_text());
+        }
+        if !lost.is_empty() {
+            status = format!("node lost: {lost}; {status}");
+        }
         let msg = match &self.session {
             None => GameState {
                 header: Header::at(Time::from_nanos(now)),

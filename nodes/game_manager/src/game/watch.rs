@@ -3,6 +3,8 @@
 //! robot is silenced and the session held (paused, not lost) until every watched node is
 //! back; then it resumes by itself, or waits for the therapist's resume. One watchdog timer,
 //! due when the earliest-heard node would time out, so a loss is seen exactly at the timeout.
+//! A node started twice (two processes beating under its name, each answering on its own) is
+//! told on the operator's terminal and kept in GameState.status until one of them stops.
 
 use super::GameManager;
 use crate::protocol::{LogLevel, Output};
@@ -56,10 +58,50 @@ impl GameManager {
                 self.on_node_back(&hb.node_name, hb.pid, lost_for_ns, now)
             }
         }
+        self.update_twins(now);
         if hb.node_name == BEHAVIOUR_POLICY_NODE {
             self.on_policy_heard(now);
         }
         self.arm_watchdog();
+    }
+
+    /// "two processes beat as node a (pids 1 and 2), ..." for GameState.status.
+    pub(super) fn twins_text(&self) -> String {
+        let pairs: Vec<String> = self
+            .twins
+            .iter()
+            .map(|t| format!("{} (pids {} and {})", t.name, t.pids.0, t.pids.1))
+            .collect();
+        format!("two processes beat as node {}: stop one", pairs.join(", "))
+    }
+
+    /// Follows the watch's pairs of processes beating under one name: a pair that starts or
+    /// ends is told on the operator's terminal, and GameState published with it.
+    fn update_twins(&mut self, now: i64) {
+        let twins = self.watched.twins(now);
+        if twins == self.twins {
+            return;
+        }
+        for t in twins.iter().filter(|t| !self.twins.contains(t)) {
+            self.out.push(Output::LiveLine(format!(
+                "!! two processes beat as node {} (pids {} and {}): stop one",
+                t.name, t.pids.0, t.pids.1
+            )));
+        }
+        let ended: Vec<String> = self
+            .twins
+            .iter()
+            .filter(|t| !twins.iter().any(|n| n.name == t.name))
+            // Both silent is a loss, told as such.
+            .filter(|t| !self.watched.is_lost(&t.name))
+            .map(|t| format!("only one process beats as node {} again", t.name))
+            .collect();
+        for line in ended {
+            self.log(LogLevel::Info, line.clone());
+            self.out.push(Output::LiveLine(line));
+        }
+        self.twins = twins;
+        self.publish_state(now);
     }
 
     /// Sets the watchdog for the watch's next deadline, unless one is set.
@@ -96,6 +138,7 @@ impl GameManager {
         if !lost.is_empty() {
             self.on_nodes_lost(&lost.join(", "), now);
         }
+        self.update_twins(now);
         self.arm_watchdog();
     }
 

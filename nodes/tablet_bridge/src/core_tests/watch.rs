@@ -100,3 +100,39 @@ fn a_restart_within_the_timeout_and_a_late_tick_show_no_loss() {
     let out = b.tick(at(7000));
     assert!(games(&out, t)[0].status.starts_with("game manager lost"));
 }
+
+#[test]
+fn two_game_managers_stay_on_the_therapist_status_until_one_stops() {
+    let (mut b, _c) = waiting();
+    let t = therapist(&mut b);
+    let mut g = game(GameState::WAITING_FOR_ANSWER, "s1");
+    g.status = "sequence 3: waiting".into();
+    b.dds(DdsInput::GameState(g.clone()), at(0));
+    // Pid 100 beats throughout; pid 101, started by mistake, 50 ms after it until 2 s.
+    let twice = "two game managers beat (pids 100 and 101): stop one; sequence 3: waiting";
+    let mut statuses = Vec::new();
+    for ms in (0..8000).step_by(50) {
+        let pid = if ms % 100 == 0 { 100 } else { 101 };
+        if pid == 101 && ms > 2000 {
+            continue;
+        }
+        let out = b.dds(beat("game_manager", pid), at(ms));
+        statuses.extend(games(&out, t).into_iter().map(|v| (ms, v.status)));
+        // A state of its own meanwhile keeps the warning in view.
+        if ms == 1000 {
+            let out = b.dds(DdsInput::GameState(g.clone()), at(ms));
+            statuses.extend(games(&out, t).into_iter().map(|v| (ms, v.status)));
+        }
+    }
+    // Told when pid 100 beats again after 101 replaced it (at 0.1 s), kept by the state at 1 s,
+    // gone with pid 100's first beat once 101 was silent for the 4 s timeout (last beat 1.95 s).
+    assert_eq!(
+        statuses,
+        vec![
+            (100, twice.to_string()),
+            (1000, twice.to_string()),
+            (6000, "sequence 3: waiting".to_string()),
+        ]
+    );
+    assert!(b.tick(at(8000)).is_empty(), "one game manager still beats");
+}

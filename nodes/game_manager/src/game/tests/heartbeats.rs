@@ -495,3 +495,55 @@ fn a_node_started_twice_is_told_once_and_the_session_goes_on() {
     assert!(h.gm.lost_nodes().is_empty());
     assert_eq!(h.results().len(), 10, "the session went on");
 }
+
+#[test]
+fn a_node_started_twice_stays_in_the_status_until_one_process_stops() {
+    // The second policy process beats for the first 30 s only.
+    let mut h = Harness::new(params(true), rule_policy(), scripted_child(vec![]));
+    h.heartbeats(CLASSIFIER, 10, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 20, T0, T0 + 400 * S);
+    h.heartbeats(POLICY, 21, T0 + ns(0.05), T0 + 30 * S);
+    h.start("s");
+    h.run_until(T0 + 400 * S);
+    let twice = "two processes beat as node behaviour_policy (pids 20 and 21): stop one";
+    let timed: Vec<(i64, String)> = h
+        .log
+        .iter()
+        .filter_map(|(t, o)| match o {
+            Output::State(s) => Some((*t, s.status.clone())),
+            _ => None,
+        })
+        .collect();
+    let shown: Vec<i64> = timed
+        .iter()
+        .filter(|(_, s)| s.starts_with(twice))
+        .map(|(t, _)| *t)
+        .collect();
+    assert!(!shown.is_empty(), "GameState.status tells it");
+    // Every state while both beat tells it, and none after the second stopped (its last beat
+    // at 29.95 s, silent for the 4 s timeout at 33.95 s).
+    let ended = T0 + ns(33.95);
+    for (t, status) in &timed {
+        if (*shown.first().unwrap_or(&0)..ended).contains(t) {
+            assert!(status.starts_with(twice), "at {t}: {status}");
+        } else if *t > ended {
+            assert!(!status.contains("two processes"), "at {t}: {status}");
+        }
+    }
+    let lines: Vec<&str> = h
+        .outputs()
+        .filter_map(|o| match o {
+            Output::LiveLine(l) if l.contains("process") => Some(l.as_str()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        lines,
+        vec![
+            format!("!! {twice}").as_str(),
+            "only one process beats as node behaviour_policy again"
+        ]
+    );
+    assert!(h.gm.lost_nodes().is_empty());
+    assert_eq!(h.results().len(), 10, "the session went on");
+}
