@@ -67,6 +67,14 @@ pub struct Twins {
     pub pids: (u32, u32),
 }
 
+/// "policy (pids 10 and 11)", as warnings name them.
+impl std::fmt::Display for Twins {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (a, b) = self.pids;
+        write!(f, "{} (pids {a} and {b})", self.name)
+    }
+}
+
 /// What one heartbeat told.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Heard {

@@ -67,11 +67,7 @@ impl GameManager {
 
     /// "two processes beat as node a (pids 1 and 2), ..." for GameState.status.
     pub(super) fn twins_text(&self) -> String {
-        let pairs: Vec<String> = self
-            .twins
-            .iter()
-            .map(|t| format!("{} (pids {} and {})", t.name, t.pids.0, t.pids.1))
-            .collect();
+        let pairs: Vec<String> = self.twins.iter().map(ToString::to_string).collect();
         format!("two processes beat as node {}: stop one", pairs.join(", "))
     }
 
@@ -84,8 +80,7 @@ impl GameManager {
         }
         for t in twins.iter().filter(|t| !self.twins.contains(t)) {
             self.out.push(Output::LiveLine(format!(
-                "!! two processes beat as node {} (pids {} and {}): stop one",
-                t.name, t.pids.0, t.pids.1
+                "!! two processes beat as node {t}: stop one"
             )));
         }
         let ended: Vec<String> = self
