@@ -7,7 +7,8 @@
 # repository) from the seeds in target/seeds.<pid>/TARGET (generated, plus the repository's own
 # files); crashes, timeouts and out-of-memory inputs land in artifacts/TARGET/.
 # PLATEAU=600 fuzz/run.sh 3600 TARGET  stops TARGET early once 10 minutes bring no new edge.
-# STABLE=1 PLATEAU=600 ...  the same, counting only edges that do not depend on the hash seed.
+# STABLE=1 PLATEAU=600 ...  the same, counting only edges that do not depend on the hash seed
+# (each count also says how many of them are in the suite's own crates).
 # MERGE=1 fuzz/run.sh 0 TARGET  minimises corpus/TARGET in place: a subset of the inputs
 # (smallest first) that still reaches every coverage edge (libFuzzer -merge=1 -use_counters=0; hit
 # counts are dropped, which keeps the kept corpora small). The seeds stay out of it: every run
@@ -85,12 +86,13 @@ write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- 
 # and seeds run once by the default build's binary, leaving out the edges the hash seed
 # decides), and stop when one count is no higher than the one before. For the YAML targets,
 # whose "cov:" moves by chance (stable_edges.sh says why).
+# Prints "STABLE OURS": the stable edges, and how many of them are in the suite's own crates.
 stable_count() {
   BIN="$default_bin_dir/$1" nice -n 10 ./stable_edges.sh "$1" "corpus/$1" "$seeds/$1" |
-    sed -n 's/.*: \([0-9]*\) stable edges.*/\1/p'
+    sed -n 's/.*: \([0-9]*\) stable edges, \([0-9]*\) of them.*/\1 \2/p'
 }
 watch_plateau() {
-  local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov pid waited
+  local t=$1 log=$2 quiet=$3 best=0 since=$SECONDS cov ours pid waited
   sleep 5
   pid=$(pgrep -n -f "release/$t " || true)
   if [ "${STABLE:-0}" = 1 ]; then
@@ -100,9 +102,10 @@ watch_plateau() {
         sleep 10
         kill -0 "$pid" 2>/dev/null || return 0
       done
-      cov=$(stable_count "$t" || true)
+      read -r cov ours < <(stable_count "$t" || true) || true
       [ -n "$cov" ] || continue
-      echo "=== $t: $cov stable edges after $((SECONDS - since)) s" | tee -a "$log"
+      echo "=== $t: $cov stable edges ($ours in our crates) after $((SECONDS - since)) s" |
+        tee -a "$log"
       if [ "$best" -gt 0 ] && [ "$cov" -le "$best" ]; then
         echo "=== $t: plateau, $best stable edges, none new for $quiet s" | tee -a "$log"
         kill -INT "$pid"
