@@ -1,4 +1,4 @@
-# Sourced by the fuzz scripts (fuzz/run.sh, nodes/bag/fuzz/run.sh): the instrumentation that
+# Sourced by the fuzz scripts (fuzz/run.sh): the instrumentation that
 # `cargo fuzz build` uses (libFuzzer coverage counters, AddressSanitizer, debug assertions and
 # overflow checks in release), and the host triple to build for, so both build fuzzers alike.
 # SANITIZER=none (fuzz/run.sh; the bag reader's script keeps ASan) leaves AddressSanitizer out,
@@ -22,5 +22,5 @@ export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4
 default_bin_dir=target/$triple/release
 # Largest input per target (libFuzzer -max_len): room for the model files seeded.
 max_len() { case $1 in
-  user_model_file) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;
+  user_model_file | read_bag) echo 65536 ;; xgboost_model) echo 32768 ;; q_table_file) echo 32768 ;;
   *) echo 8192 ;; esac; }

@@ -3,7 +3,7 @@
 # instrumentation flags, nightly, AddressSanitizer), for machines without cargo-fuzz.
 #   fuzz/run.sh [SECONDS_PER_TARGET] [TARGET...]      (default 300 s, every target; 0 builds only)
 # Targets: msg_decode user_model_file q_table_file xgboost_model params_file launch_file
-# tablet_ws. Each runs in turn (nice -n 10); its corpus grows in corpus/TARGET (kept in the
+# tablet_ws read_bag. Each runs in turn (nice -n 10); its corpus grows in corpus/TARGET (kept in the
 # repository) from the seeds in target/seeds.<pid>/TARGET (generated, plus the repository's own
 # files); crashes, timeouts and out-of-memory inputs land in artifacts/TARGET/.
 # PLATEAU=600 fuzz/run.sh 3600 TARGET  stops TARGET early once 10 minutes bring no new edge.
@@ -24,7 +24,7 @@ secs=${1:-300}
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(msg_decode user_model_file q_table_file xgboost_model params_file launch_file tablet_ws)
+  targets=(msg_decode user_model_file q_table_file xgboost_model params_file launch_file tablet_ws read_bag)
 fi
 source ./libfuzzer_flags.sh
 # Some binaries always come from the default (ASan) build: make_seeds, which is no fuzz target
@@ -75,7 +75,7 @@ write_dict "$seeds/params_file.dict" "${param_keys[@]}" "${param_nodes[@]}" "${e
   "/**:" "/**/" "ros__parameters:" RE RE+bE lE engaged disengaged magnitude none \
   127.0.0.1:8080 "[::1]:80" en de fr
 mapfile -t launch_keys < <(yaml_keys ../launch_scripts/*.yaml ../tests/launch/*.yaml;
-  sed -nE 's/^    ([a-z_]+): .*/\1:/p' ../nodes/launcher/src/description.rs)
+  sed -nE 's/^    ([a-z_]+): .*/\1:/p' ../tools/launcher/src/description.rs)
 write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- " "{" "}" \
   "\$(var " "\$(env " "\$(find-pkg-share " "\$(" ")" "'" "\"" true false True False \
   screen log both shutdown

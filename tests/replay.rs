@@ -7,7 +7,7 @@
 //! decisions, answers and engagement -> results, game states, tablet tasks and robot acts).
 //! The last test replays the faces over real DDS into a real `engagement_classifier run`.
 
-use bag::BagReader;
+use bag_file::BagReader;
 use behaviour_policy::messages::transition;
 use behaviour_policy::{BehaviourPolicyParams, PolicyCore, QTableFile};
 use engagement_classifier::messages::{Sources, source_name};

@@ -72,8 +72,8 @@ fn a_whole_simulated_session_over_dds() {
     );
     assert!(stdout.contains("finished: 10 sequences"), "{context}");
 
-    let reader =
-        bag::BagReader::open(&out.join("session.mcap")).expect("the recorder wrote a readable bag");
+    let reader = bag_file::BagReader::open(&out.join("session.mcap"))
+        .expect("the recorder wrote a readable bag");
     let results: Vec<SequenceResult> = reader
         .messages(SEQUENCE_RESULT.name)
         .expect("results")
@@ -351,7 +351,7 @@ echo "launch_exit=$?"
     assert_eq!(summary["end"], "finished", "{summary}");
 
     // The bag: every result and every task once, in order.
-    let reader = bag::BagReader::open(&out.join("session.mcap")).expect("a readable bag");
+    let reader = bag_file::BagReader::open(&out.join("session.mcap")).expect("a readable bag");
     let results: Vec<u8> = reader
         .messages::<SequenceResult>(SEQUENCE_RESULT.name)
         .expect("results")
@@ -536,7 +536,7 @@ echo "launch_exit=$?"
         .find(|m| m.message.command == TherapistCommand::RESUME)
         .unwrap_or_else(|| panic!("no resume in the bag: {context}"));
     let tag = format!("(command {})", resume.message.command_id);
-    let carried_out: Vec<&bag::Stamped<GameState>> = states
+    let carried_out: Vec<&bag_file::Stamped<GameState>> = states
         .iter()
         .filter(|m| m.message.status.contains(&tag) && !m.message.status.starts_with("rejected"))
         .collect();
@@ -693,7 +693,7 @@ fn respawn_readiness(stderr: &str, node: &str) -> String {
 }
 
 /// Sequence results recorded after `t` (log time, ns).
-fn results_after(reader: &bag::BagReader, t: u64) -> usize {
+fn results_after(reader: &bag_file::BagReader, t: u64) -> usize {
     reader
         .messages::<SequenceResult>(SEQUENCE_RESULT.name)
         .map(|m| m.iter().filter(|r| r.log_time > t).count())

@@ -3,7 +3,7 @@
 messages, one run, ratios printed.
 
 Run from the workspace root:  python3 bench/bag/bench_record.py [zstd|lz4]
-(builds the `bench_record` example with --release; needs the `mcap` package)
+(builds the `bench_record` benchmark binary with --release; needs the `mcap` package)
 
 Messages: one SYNTHETIC hour of a session's traffic from the example (OpenFace frames and
 engagement labels at 30 Hz, heartbeats of five nodes at 10 Hz, expected engagement at 1 Hz, a
@@ -61,8 +61,8 @@ def main():
     codec = sys.argv[1] if len(sys.argv) > 1 else "zstd"
     compression = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}[codec]
     tmp = tempfile.mkdtemp(prefix="bag_bench_")
-    run(["cargo", "build", "--release", "-q", "-p", "bag", "--example", "bench_record"])
-    rust = json.loads(run(["target/release/examples/bench_record", tmp, codec]))
+    run(["cargo", "build", "--release", "-q", "-p", "suite_bench", "--bin", "bench_record"])
+    rust = json.loads(run(["target/release/bench_record", tmp, codec]))
     channels = json.load(open(os.path.join(tmp, "channels.json")))
     payloads = load(os.path.join(tmp, "payloads.bin"))
     assert len(payloads) == rust["messages"]

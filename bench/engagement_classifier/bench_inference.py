@@ -3,7 +3,7 @@
 one run, ratios printed.
 
 Run from the workspace root:  python3 bench/engagement_classifier/bench_inference.py
-(builds the `bench_inference` example with --release; needs xgboost, numpy, pandas)
+(builds the `bench_inference` benchmark binary with --release; needs xgboost, numpy, pandas)
 
 Model: nodes/engagement_classifier/models/synthetic_engagement.json (100 trees, with the
 stored standardisation). Rows: 3,600 SYNTHETIC frames from `engagement_classifier synthesize`.
@@ -36,10 +36,9 @@ def main():
     rows_csv = os.path.join(tmp, "rows.csv")
     run(["cargo", "run", "--release", "-q", "-p", "engagement_classifier", "--",
          "synthesize", "--output", rows_csv])
-    run(["cargo", "build", "--release", "-q", "-p", "engagement_classifier",
-         "--example", "bench_inference"])
+    run(["cargo", "build", "--release", "-q", "-p", "suite_bench", "--bin", "bench_inference"])
     probs_out = os.path.join(tmp, "rust_probabilities.txt")
-    rust = json.loads(run(["target/release/examples/bench_inference", MODEL, rows_csv, probs_out]))
+    rust = json.loads(run(["target/release/bench_inference", MODEL, rows_csv, probs_out]))
 
     booster = xgb.Booster(model_file=MODEL)
     booster.set_param({"nthread": 1})

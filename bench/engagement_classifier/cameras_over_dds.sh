@@ -2,7 +2,7 @@
 # Several cameras over DDS, end to end: does the real `engagement_classifier run` process keep
 # up with 30 fps from several cameras with no backlog? One release node (params/
 # engagement_classifier.yaml, as the launch files start it) and, one after the other, the peer
-# `examples/cameras_over_dds.rs` for 1, 4 and 8 cameras of SYNTHETIC OpenFace frames, all inside
+# `bench/engagement_classifier/cameras_over_dds.rs` for 1, 4 and 8 cameras of SYNTHETIC OpenFace frames, all inside
 # one private loopback-only network namespace. Per run: frames sent, estimates back (lost: the
 # frame and estimate topics are best effort), latency from send to estimate receipt (median,
 # p99, max), median latency of the first vs the last quarter (a backlog grows it), achieved vs
@@ -20,7 +20,8 @@ FPS=${FPS:-30}
 SEED=${SEED:-7}
 
 if [ -z "${CAMERAS_OVER_DDS_INSIDE:-}" ]; then
-  cargo build --release -p engagement_classifier --bin engagement_classifier --example cameras_over_dds
+  cargo build --release -p engagement_classifier --bin engagement_classifier
+  cargo build --release -p suite_bench --bin cameras_over_dds
   OUT=${OUT:-out/cameras_over_dds-$(date +%Y%m%d-%H%M%S)}
   mkdir -p "$OUT"
   export OUT CAMERAS SECONDS_PER_RUN FPS SEED
@@ -71,7 +72,7 @@ for n in $CAMERAS; do
   echo
   echo "=== $n camera(s) x $FPS fps, $SECONDS_PER_RUN s"
   cpu0=$(node_cpu_ticks); t0=$(date +%s.%N)
-  target/release/examples/cameras_over_dds --cameras "$n" --seconds "$SECONDS_PER_RUN" \
+  target/release/cameras_over_dds --cameras "$n" --seconds "$SECONDS_PER_RUN" \
     --fps "$FPS" --seed "$SEED" --tsv "$TSV" --timeline 2>"$OUT/peer-$n.log" | tee "$OUT/peer-$n.txt"
   cpu1=$(node_cpu_ticks); t1=$(date +%s.%N)
   # The node's CPU over the peer's whole run (discovery, warm-up, measured seconds, settle).

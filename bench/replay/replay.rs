@@ -1,6 +1,6 @@
 //! Benchmark: one hour of a session replayed through the engagement classifier's and the
 //! behaviour policy's sans-IO cores as fast as possible, against real time (target >= 1000x).
-//!   cargo bench -p suite_tests --bench replay [-- BAG]     (default bags/cluster0_seed7.mcap)
+//!   cargo bench -p suite_bench --bench replay [-- BAG]     (default bags/cluster0_seed7.mcap)
 //!
 //! The hour is synthesised from a sample bag recorded from the simulated suite: the whole bag
 //! (every topic: 30 fps OpenFace frames, per-frame estimates, heartbeats, game states,
@@ -18,7 +18,7 @@
 //! bench/engagement_classifier/bench_inference.py, the policy's Q-learning against NumPy is
 //! bench/behaviour_policy/bench_policy.py.
 
-use bag::{BagReader, BagWriter, Compression, Stamp, WriterOptions};
+use bag_file::{BagReader, BagWriter, Compression, Stamp, WriterOptions};
 use behaviour_policy::messages::transition;
 use behaviour_policy::{BehaviourPolicyParams, PolicyCore, QTableFile};
 use engagement_classifier::messages::Sources;
@@ -87,13 +87,13 @@ fn synthesise_hour(sample: &Path, out: &Path) -> anyhow::Result<(usize, i64)> {
                 sequence: raw.sequence,
             };
             if topic == OPENFACE_FEATURES.name {
-                let mut f: OpenFaceFeatures = bag::cdr::decode(&raw.data)?;
+                let mut f: OpenFaceFeatures = bag_file::cdr::decode(&raw.data)?;
                 let t = f.header.stamp.to_nanos() + shift;
                 if t - first_stamp >= HOUR_NS {
                     break 'copies;
                 }
                 f.header.stamp = Time::from_nanos(t);
-                w.write_cdr(*id, stamp, &bag::cdr::encode(&f)?)?;
+                w.write_cdr(*id, stamp, &bag_file::cdr::encode(&f)?)?;
                 frames += 1;
                 span = t - first_stamp;
             } else {
@@ -184,9 +184,9 @@ fn decoded(reader: &BagReader) -> anyhow::Result<Vec<Event>> {
     let mut out = Vec::new();
     for (c, raw) in reader.iter() {
         let e = match c.topic.as_str() {
-            t if t == OPENFACE_FEATURES.name => Event::Frame(bag::cdr::decode(&raw.data)?),
-            t if t == DECISION.name => Event::Decide(bag::cdr::decode(&raw.data)?),
-            t if t == SEQUENCE_RESULT.name => Event::Learn(bag::cdr::decode(&raw.data)?),
+            t if t == OPENFACE_FEATURES.name => Event::Frame(bag_file::cdr::decode(&raw.data)?),
+            t if t == DECISION.name => Event::Decide(bag_file::cdr::decode(&raw.data)?),
+            t if t == SEQUENCE_RESULT.name => Event::Learn(bag_file::cdr::decode(&raw.data)?),
             _ => continue,
         };
         out.push(e);

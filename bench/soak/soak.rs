@@ -8,7 +8,7 @@
 //!   soak --sessions 1000 --out out/soak
 
 use anyhow::{Context, bail};
-use bag::BagReader;
+use bag_file::BagReader;
 use clap::Parser;
 use qt_therapy_msgs::topics::{
     DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,

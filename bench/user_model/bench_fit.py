@@ -3,7 +3,7 @@
 run, ratios printed. Not a test.
 
 Run from the workspace root:  python3 bench/user_model/bench_fit.py [--reps N]
-(builds the `bench_fit` example of user_model with --release; needs numpy and scikit-learn)
+(builds the `bench_fit` benchmark binary and the user_model binary with --release; needs numpy and scikit-learn)
 
 Data: the REAL MigrAVE study in ../shared/data/migrave-study when it is there, else the
 SYNTHETIC study written by `user_model simulate-study`.
@@ -99,9 +99,10 @@ def main():
     else:
         data, label = os.path.join(tmp, "synthetic_study.csv"), "SYNTHETIC study"
         run(["cargo", "run", "--release", "-q", "-p", "user_model", "--", "simulate-study", "--output", data])
-    run(["cargo", "build", "--release", "-q", "-p", "user_model", "--bin", "user_model", "--example", "bench_fit"])
+    run(["cargo", "build", "--release", "-q", "-p", "user_model", "--bin", "user_model"])
+    run(["cargo", "build", "--release", "-q", "-p", "suite_bench", "--bin", "bench_fit"])
     model_path = os.path.join(tmp, "model.json")
-    rust = json.loads(run(["target/release/examples/bench_fit", data, model_path, "30"]))
+    rust = json.loads(run(["target/release/bench_fit", data, model_path, "30"]))
     model = json.load(open(model_path))
 
     warnings.simplefilter("ignore", ConvergenceWarning)

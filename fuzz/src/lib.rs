@@ -19,7 +19,7 @@ use std::time::Duration;
 pub type Target = fn(&[u8]);
 
 /// The fuzz targets, by name, with their bodies.
-pub const TARGETS: [(&str, Target); 7] = [
+pub const TARGETS: [(&str, Target); 8] = [
     ("msg_decode", msg_decode),
     ("user_model_file", user_model_file),
     ("q_table_file", q_table_file),
@@ -27,6 +27,7 @@ pub const TARGETS: [(&str, Target); 7] = [
     ("params_file", params_file),
     ("launch_file", launch_file),
     ("tablet_ws", tablet_ws),
+    ("read_bag", read_bag),
 ];
 
 // ---------------------------------------------------------------------------------------
@@ -87,7 +88,7 @@ where
         round_trip(&m);
     }
     // The bag reader: the same header, stricter about trailing bytes.
-    if let Ok(m) = bag::cdr::decode::<M>(payload) {
+    if let Ok(m) = bag_file::cdr::decode::<M>(payload) {
         let _ = m.validate();
         round_trip(&m);
     }
@@ -96,15 +97,15 @@ where
 /// Whatever decodes must encode again, and decode to a message that encodes the same
 /// (bytes, not values: NaN fields are not equal to themselves).
 fn round_trip<M: DeserializeOwned + Serialize + std::fmt::Debug>(m: &M) {
-    let bytes = match bag::cdr::encode(m) {
+    let bytes = match bag_file::cdr::encode(m) {
         Ok(b) => b,
         Err(e) => panic!("decoded {m:?} does not encode: {e}"),
     };
-    let again: M = match bag::cdr::decode(&bytes) {
+    let again: M = match bag_file::cdr::decode(&bytes) {
         Ok(a) => a,
         Err(e) => panic!("re-encoded {m:?} does not decode: {e}"),
     };
-    match bag::cdr::encode(&again) {
+    match bag_file::cdr::encode(&again) {
         Ok(b) => assert_eq!(b, bytes, "{m:?} changes in a round trip"),
         Err(e) => panic!("{again:?} does not encode: {e}"),
     }
@@ -119,7 +120,7 @@ pub fn user_model_file(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let Ok(set) = user_model::UserModelSet::from_json_str(text, Path::new("fuzz.json")) else {
+    let Ok(set) = user_models::UserModelSet::from_json_str(text, Path::new("fuzz.json")) else {
         return;
     };
     for cluster in [-1, 0, 1, 2, i64::MAX] {
@@ -374,5 +375,44 @@ pub fn tablet_ws(data: &[u8]) {
             }
             Output::Close(..) => {}
         }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// read_bag
+
+/// Any bytes through the bag reader and everything built on it (summary, typed CDR decoding
+/// of every suite topic, the player's plan). Nothing may panic, abort or hang.
+pub fn read_bag(data: &[u8]) {
+    use bag_file::schedule::{PlayOptions, plan};
+    use bag_file::{BagInfo, BagReader, ReadOptions};
+
+    // A small chunk limit keeps each run's memory bounded the same way production's does.
+    let options = ReadOptions {
+        max_chunk_bytes: 4 << 20,
+    };
+    let Ok(reader) = BagReader::from_bytes(data, "fuzz", &options) else {
+        return;
+    };
+    let _ = BagInfo::of(&reader).to_text();
+    for channel in reader.channels() {
+        if let Some(t) = bag_file::suite::suite_type(channel.type_name()) {
+            for m in reader
+                .raw_messages()
+                .iter()
+                .filter(|m| m.channel_id == channel.id)
+            {
+                let _ = t.check_cdr(&m.data);
+            }
+        }
+    }
+    for rate in [Some(1.0), Some(1e-300), None] {
+        let o = PlayOptions {
+            rate,
+            start_offset: Duration::from_millis(5),
+            topics: vec![],
+            remap: vec![],
+        };
+        let _ = plan(&reader, &o, |_| Ok(()));
     }
 }

@@ -4,6 +4,19 @@
 
 use serde::{Serialize, de::DeserializeOwned};
 
+/// What DDS needs of a message: ros2-client's `Message` with the `dds` feature, nothing
+/// without it. A supertrait of [`MessageDefinition`], so code generic over messages reaches
+/// DDS without naming ros2-client.
+#[cfg(feature = "dds")]
+pub trait DdsMessage: ros2_client::Message {}
+#[cfg(feature = "dds")]
+impl<T: ros2_client::Message> DdsMessage for T {}
+/// What DDS needs of a message: nothing, as this build has no DDS (`dds` feature off).
+#[cfg(not(feature = "dds"))]
+pub trait DdsMessage {}
+#[cfg(not(feature = "dds"))]
+impl<T> DdsMessage for T {}
+
 /// A ROS 2 field type, named as a `.msg` file names it (`float32`, `string[]`,
 /// `std_msgs/Header`).
 pub trait RosType {
@@ -37,7 +50,7 @@ pub struct Constant {
 
 /// A Rust type that mirrors a `.msg` file (or one half of a `.srv` file).
 pub trait MessageDefinition:
-    Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + Sync + 'static
+    Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + Sync + 'static + DdsMessage
 {
     const PACKAGE: &'static str;
     /// `Header`, `OpenFaceFeatures`, or `PredictUser_Request` for a service half.
@@ -136,6 +149,7 @@ macro_rules! ros_message {
             $($( $(#[$cmeta])* pub const $cname: $cty = $cval; )*)?
         }
 
+        #[cfg(feature = "dds")]
         impl ros2_client::Message for $name {}
 
         impl $crate::definition::RosType for $name {

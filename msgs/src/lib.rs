@@ -4,7 +4,9 @@
 //! peer, and names itself `qt_therapy_msgs::msg::dds_::<Type>_` on DDS.
 
 pub mod definition;
+pub mod live_line;
 pub mod messages;
+pub mod sequence_engagement;
 pub mod services;
 mod standard;
 pub mod topics;
@@ -52,6 +54,7 @@ pub const OPENFACE_FEATURES: [&str; 32] = [
     "gaze_angle_y",
 ];
 
+#[cfg(feature = "dds")]
 /// The ROS 2 DDS type name of a message, e.g. `qt_therapy_msgs::msg::dds_::GameState_`.
 pub fn dds_type_name<M: MessageDefinition>() -> ros2_client::MessageTypeName {
     ros2_client::MessageTypeName::new(M::PACKAGE, M::NAME)

@@ -9,8 +9,8 @@ const PKG: &str = "qt_therapy_msgs";
 pub trait ServiceDefinition {
     const PACKAGE: &'static str;
     const NAME: &'static str;
-    type Request: crate::MessageDefinition + ros2_client::Message;
-    type Response: crate::MessageDefinition + ros2_client::Message;
+    type Request: crate::MessageDefinition;
+    type Response: crate::MessageDefinition;
     fn definition_text() -> &'static str;
 }
 

@@ -8,7 +8,7 @@ Run from the workspace root:
     python3 tests/bags/check_bag.py              # writes and checks the synthetic test session
     python3 tests/bags/check_bag.py A.mcap ...   # checks bags you recorded (both readers agree)
 
-Without arguments it runs `cargo run -p bag --example write_check_bags` to write the synthetic
+Without arguments it runs `cargo run -p bag_file --example write_check_bags` to write the synthetic
 session with zstd, lz4 and uncompressed chunks, then checks in both readers that the profile,
 schemas, channels, QoS metadata, summary and every decoded message match what was written.
 Exits non-zero on the first mismatch.
@@ -174,7 +174,7 @@ def main():
         return
     root = Path(__file__).resolve().parents[2]
     out = tempfile.mkdtemp(prefix="bag_check_")
-    subprocess.run(["cargo", "run", "-q", "-p", "bag", "--example", "write_check_bags", "--", out],
+    subprocess.run(["cargo", "run", "-q", "-p", "bag_file", "--example", "write_check_bags", "--", out],
                    check=True, cwd=root, stdout=subprocess.DEVNULL)
     expected = json.loads(Path(out, "expected.json").read_text())
     qos_class = {e["topic"]: e["qos"] for e in expected}

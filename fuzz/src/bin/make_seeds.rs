@@ -1,7 +1,8 @@
 //! Writes the generated seeds of every fuzz target under SEEDS_DIR/<target>/: valid encoded
 //! messages of every type (hand-made, and real ones from the sample bags), Q-tables as the
 //! policy writes them, shrunk copies of the shipped model files, tablet conversations, and the
-//! shipped parameter and launch files with one value at a time set to an edge value. run.sh
+//! shipped parameter and launch files with one value at a time set to an edge value, and small
+//! bags of every compression. run.sh
 //! adds the repository's own files next to them.
 //!   make_seeds SEEDS_DIR
 
@@ -25,6 +26,60 @@ fn main() -> anyhow::Result<()> {
     tablet(&root.join("tablet_ws"))?;
     parameter_edges(&repo, &root.join("params_file"))?;
     launch_edges(&repo, &root.join("launch_file"))?;
+    bags(&root.join("read_bag"))?;
+    Ok(())
+}
+
+/// Small bags of every compression, one message of several suite types each, so the bag
+/// reader's fuzzing starts from valid files.
+fn bags(dir: &Path) -> anyhow::Result<()> {
+    use bag_file::{BagWriter, Compression, WriterOptions};
+    use qt_therapy_msgs::topics::{GAME_STATE, OPENFACE_FEATURES, ROBOT_SPEECH};
+    use std::io::Cursor;
+    std::fs::create_dir_all(dir)?;
+    for (name, compression) in [
+        ("zstd", Compression::Zstd),
+        ("lz4", Compression::Lz4),
+        ("none", Compression::None),
+    ] {
+        let options = WriterOptions {
+            compression,
+            chunk_size: 256,
+            compression_threads: 0,
+        };
+        let mut w = BagWriter::new(Cursor::new(Vec::new()), "seed", &options)?;
+        let speech = w.add_topic(ROBOT_SPEECH)?;
+        let state = w.add_topic(GAME_STATE)?;
+        let face = w.add_topic(OPENFACE_FEATURES)?;
+        w.write(
+            speech,
+            10,
+            &StringMsg {
+                data: "happy".into(),
+            },
+        )?;
+        w.write(
+            state,
+            20,
+            &GameState {
+                phase: 3,
+                status: "saying".into(),
+                ..Default::default()
+            },
+        )?;
+        w.write(
+            face,
+            30,
+            &OpenFaceFeatures {
+                features: vec![0.5; 32],
+                success: true,
+                ..Default::default()
+            },
+        )?;
+        w.write(speech, 5, &StringMsg { data: "sad".into() })?;
+        let bytes = w.finish()?.into_inner();
+        std::fs::write(dir.join(format!("seed_{name}.mcap")), bytes)?;
+    }
     Ok(())
 }
 
@@ -166,7 +221,7 @@ fn message<M: Serialize + Validate>(
             .map_err(|e| anyhow::anyhow!("seed {name} {tag} is not a valid message: {e}"))?;
     }
     let mut bytes = vec![kind(name)?];
-    bytes.extend(bag::cdr::encode(m)?);
+    bytes.extend(bag_file::cdr::encode(m)?);
     write(dir, &format!("seed_{name}_{tag}"), &bytes)
 }
 
@@ -175,7 +230,7 @@ fn message<M: Serialize + Validate>(
 fn recorded_messages(repo: &Path, dir: &Path) -> anyhow::Result<()> {
     const PER_TYPE: usize = 3;
     for path in files_in(&repo.join("bags"), ".mcap")? {
-        let reader = bag::BagReader::open(&path)?;
+        let reader = bag_file::BagReader::open(&path)?;
         let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         let mut taken = std::collections::BTreeMap::<u8, usize>::new();
         for (channel, raw) in reader.iter() {

@@ -2,7 +2,7 @@
 //! laid out like `ros2 bag info` or as one JSON object.
 
 use anyhow::Context as _;
-use bag::{BagInfo, BagReader};
+use bag_file::{BagInfo, BagReader};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]

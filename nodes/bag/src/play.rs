@@ -3,10 +3,11 @@
 //! loop. A damaged bag plays up to its first bad record; channels of unknown types are skipped.
 
 use anyhow::{Context as _, bail};
+use bag::dds_types::{CdrPublisher, dds_type};
 use bag::params::PlayerParams;
-use bag::schedule::{PlayOptions, parse_remap, plan};
-use bag::suite::{CdrPublisher, suite_type};
-use bag::{BagReader, ChannelInfo};
+use bag_file::schedule::{PlayOptions, parse_remap, plan};
+use bag_file::suite::suite_type;
+use bag_file::{BagReader, ChannelInfo};
 use node_shell::{NodeShell, ShellOptions};
 use qt_therapy_msgs::topics::{QosKind, all_topics};
 use std::path::PathBuf;
@@ -119,7 +120,7 @@ pub async fn run(args: PlayArgs) -> anyhow::Result<()> {
     }
     let mut publishers: Vec<Box<dyn CdrPublisher>> = Vec::new();
     for out in &plan.outputs {
-        let ty = suite_type(&out.type_name).context("a planned type is known")?;
+        let ty = dds_type(&out.type_name).context("a planned type is known")?;
         // Offer what the recording publisher offered; else what the suite's table says.
         let qos = reader
             .channel(out.channel_id)

@@ -8,10 +8,10 @@
 //! not written twice.
 
 use anyhow::{Context as _, bail};
+use bag::dds_types::dds_type;
 use bag::params::RecorderParams;
-use bag::qos::offered_qos_yaml;
-use bag::suite::suite_type;
-use bag::{BagReader, BagWriter, Compression, Stamp, WriterOptions, partial_path};
+use bag_file::qos::offered_qos_yaml;
+use bag_file::{BagReader, BagWriter, Compression, Stamp, WriterOptions, partial_path};
 use node_shell::{NodeShell, ShellOptions};
 use qt_therapy_msgs::topics::{QosKind, TopicInfo, all_topics};
 use std::collections::{BTreeMap, HashSet};
@@ -169,7 +169,7 @@ fn carry_over(
 fn write_sample(
     writer: &mut BagWriter<std::io::BufWriter<std::fs::File>>,
     carried: &mut HashSet<SentKey>,
-    sample: bag::suite::Sample,
+    sample: bag_file::suite::Sample,
 ) -> anyhow::Result<()> {
     if !carried.is_empty()
         && carried.remove(&(
@@ -213,7 +213,7 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
     let mut taps = Vec::new();
     let mut channels = BTreeMap::new();
     for t in &topics {
-        let Some(ty) = suite_type(&t.type_name) else {
+        let Some(ty) = dds_type(&t.type_name) else {
             bail!(
                 "{} has type {}, which the recorder does not know",
                 t.name,

@@ -2,9 +2,10 @@
 //! truncated bag: the text has `ros2 bag info`'s lines, the JSON its numbers, and damage is
 //! reported (exit status 2 with --strict) after what was readable.
 
+#[path = "../../../libs/bag_file/tests/common/mod.rs"]
 mod common;
 
-use bag::{BagWriter, Compression, WriterOptions, partial_path};
+use bag_file::{BagWriter, Compression, WriterOptions, partial_path};
 use common::session_bytes;
 use std::process::Command;
 

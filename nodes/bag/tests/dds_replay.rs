@@ -5,9 +5,10 @@
 //! SIGKILL mid-session and its file still holds everything but the last second; a recorder
 //! respawned on the same output carries that file over and finishes one whole bag.
 
+#[path = "../../../libs/bag_file/tests/common/mod.rs"]
 mod common;
 
-use bag::{BagReader, Compression, RawMessage, WriterOptions, partial_path};
+use bag_file::{BagReader, Compression, RawMessage, WriterOptions, partial_path};
 use qt_therapy_msgs::Heartbeat;
 use qt_therapy_msgs::topics::{HEARTBEAT, OPENFACE_FEATURES, ROBOT_EMOTION, ROBOT_SPEECH};
 use std::collections::BTreeMap;
@@ -23,7 +24,8 @@ fn payloads(reader: &BagReader) -> BTreeMap<String, Vec<&RawMessage>> {
     let mut out: BTreeMap<String, Vec<&RawMessage>> = BTreeMap::new();
     for (c, m) in reader.iter() {
         if c.topic == HEARTBEAT.name
-            && bag::cdr::decode::<Heartbeat>(&m.data).is_ok_and(|h| h.node_name.starts_with("bag_"))
+            && bag_file::cdr::decode::<Heartbeat>(&m.data)
+                .is_ok_and(|h| h.node_name.starts_with("bag_"))
         {
             continue;
         }
@@ -176,7 +178,7 @@ fn played_bags_come_back_through_dds_and_a_killed_recorder_keeps_all_but_the_las
     let rec3 = BagReader::open(&partial_path(&d.join("rec3-killed.mcap"))).expect("rec3 partial");
     assert!(!rec3.is_complete());
     if let Some(e) = rec3.damage() {
-        assert!(matches!(e, bag::BagError::Truncated { .. }), "{e}");
+        assert!(matches!(e, bag_file::BagError::Truncated { .. }), "{e}");
     }
     let killed_ns = status["killed_ns"].as_u64().expect("kill time");
     let (_, last) = rec3

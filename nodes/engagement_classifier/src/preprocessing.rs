@@ -5,7 +5,7 @@
 //! It travels as a JSON string in the XGBoost model's `learner.attributes` under
 //! [`PREPROCESSING_ATTRIBUTE`], so the file stays a plain XGBoost model that Python loads.
 
-use crate::features::{FEATURE_COUNT, canonical_index, model_feature_name, nan_fill_uses_max};
+use crate::features::{FEATURE_COUNT, canonical_index, model_feature_name};
 use serde::{Deserialize, Serialize};
 
 /// Attribute key of the preprocessing block in `learner.attributes`.
@@ -180,6 +180,34 @@ impl Preprocessing {
     }
 }
 
+/// The authors fill NaN after standardising with the column maximum for the columns whose
+/// names start with one of these prefixes, and with the minimum otherwise. Their list spells
+/// `of_pose_Rxv`, so `of_pose_Rx` is filled with the minimum; we follow their code.
+const NAN_FILL_WITH_MAX_PREFIXES: [&str; 13] = [
+    "of_gaze_0_x",
+    "of_gaze_0_y",
+    "of_gaze_0_z",
+    "of_gaze_1_x",
+    "of_gaze_1_y",
+    "of_gaze_1_z",
+    "of_gaze_angle_x",
+    "of_gaze_angle_y",
+    "of_pose_Ry",
+    "of_pose_Rz",
+    "of_pose_Tx",
+    "of_pose_Ty",
+    "of_pose_Tz",
+];
+
+/// Whether the authors' rule fills missing values of canonical feature `index` with the
+/// standardised column maximum (else the minimum).
+pub fn nan_fill_uses_max(index: usize) -> bool {
+    let name = model_feature_name(index);
+    NAN_FILL_WITH_MAX_PREFIXES
+        .iter()
+        .any(|p| name.starts_with(p))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,5 +271,21 @@ mod tests {
         block.features.pop();
         let err = Preprocessing::from_block(&block).expect_err("refused");
         assert!(err.to_string().contains("31 features"), "{err}");
+    }
+
+    #[test]
+    fn nan_fill_rule_follows_the_authors_list() {
+        let idx = |n: &str| canonical_index(n).expect("known");
+        assert!(nan_fill_uses_max(idx("gaze_angle_y")));
+        assert!(nan_fill_uses_max(idx("pose_Tz")));
+        assert!(
+            !nan_fill_uses_max(idx("pose_Rx")),
+            "their list says of_pose_Rxv"
+        );
+        assert!(!nan_fill_uses_max(idx("AU45_c")));
+        assert!(
+            crate::features::is_continuous(idx("pose_Rx"))
+                && !crate::features::is_continuous(idx("AU01_c"))
+        );
     }
 }

@@ -6,11 +6,9 @@
 //! files ([`recovery`]). `src/main.rs` connects it to DDS.
 
 pub mod game;
-pub mod live_line;
 pub mod params;
 pub mod protocol;
 pub mod recovery;
-pub mod scoring;
 pub mod sequence;
 pub mod session_file;
 pub mod utterances;

@@ -5,7 +5,7 @@
 //! looks down at the tablet. Faces come from the engagement classifier's SYNTHETIC generator, so
 //! the real classifier turns them back into engagement: a whole session exercises every node.
 
-use engagement_classifier::synthetic::{SyntheticSpec, generate};
+use openface::synthetic::{SyntheticSpec, generate};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, OpenFaceFeatures, TabletAnswer, TabletTask};

@@ -39,7 +39,7 @@ async fn main() -> anyhow::Result<()> {
 
 /// Plays the child until the node is asked to stop.
 async fn play(shell: &mut NodeShell, params: ChildParams) -> anyhow::Result<()> {
-    let set = user_model::UserModelSet::load(std::path::Path::new(&params.user_model_file))
+    let set = user_models::UserModelSet::load(std::path::Path::new(&params.user_model_file))
         .with_context(|| format!("loading user_model_file {}", params.user_model_file))?;
     let table = set
         .table(params.cluster)

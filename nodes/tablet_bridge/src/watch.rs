@@ -9,7 +9,7 @@
 
 use crate::bridge::{Bridge, Now, Output};
 use crate::protocol::{GameView, Role, ServerMessage};
-use node_shell::heartbeat_watch::{Heard, HeartbeatWatch, Twins};
+use heartbeat_watch::{Heard, HeartbeatWatch, Twins};
 use qt_therapy_msgs::{GameState, Heartbeat};
 use std::time::Duration;
 

@@ -16,8 +16,8 @@
 
 mod support;
 
-use engagement_classifier::synthetic::{SyntheticSpec, generate};
 use node_shell::{NoParameters, NodeShell, ShellOptions, header_now};
+use openface::synthetic::{SyntheticSpec, generate};
 use qt_therapy_msgs::topics::{
     DECISION, OPENFACE_FEATURES, ROBOT_SPEECH, TABLET_ANSWER, TABLET_TASK,
 };

@@ -5,8 +5,8 @@
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
-use game_manager::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
 use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
+use qt_therapy_msgs::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
 use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND};
 use qt_therapy_msgs::{Decision, GameState, TherapistCommand};
 use std::time::Duration;

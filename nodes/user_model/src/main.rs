@@ -5,6 +5,7 @@
 //!   user_model simulate-study --output out/synthetic_study.csv
 
 mod commands;
+mod plot;
 
 use clap::{Parser, Subcommand};
 

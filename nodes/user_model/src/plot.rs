@@ -1,9 +1,9 @@
 //! The paper's Fig. 3: (a) users in the PCA plane coloured by cluster; (b) per cluster and
 //! level, P(success|L) and E|L with their standard deviation across users.
 
-use crate::model::UserModelFile;
 use plotters::prelude::*;
 use std::path::Path;
+use user_models::model::UserModelFile;
 
 const COLOURS: [RGBColor; 4] = [
     RGBColor(31, 119, 180),

@@ -2,14 +2,15 @@
 //! hyperparameters, from CSV and from session bags), predict; a failing fit writes nothing;
 //! and the node (`run`) answering PredictUser and AssignCluster over DDS.
 
+#[path = "../../../libs/user_models/tests/common/mod.rs"]
 mod common;
 
 use std::path::Path;
 use std::process::Command;
-use user_model::InteractionRecord;
-use user_model::data::bag::read_bags;
-use user_model::data::{read_csv, read_sources, write_csv};
-use user_model::simulate::{StudySpec, simulate_study};
+use user_models::InteractionRecord;
+use user_models::data::bag::read_bags;
+use user_models::data::{read_csv, read_sources, write_csv};
+use user_models::simulate::{StudySpec, simulate_study};
 
 fn user_model(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_user_model"))
@@ -99,11 +100,11 @@ fn simulate_fit_predict() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let set = user_model::UserModelSet::load(&fixed).expect("loads");
+    let set = user_models::UserModelSet::load(&fixed).expect("loads");
     for c in &set.file().clusters {
         assert_eq!(
             c.success.kernel,
-            user_model::Kernel::RationalQuadratic {
+            user_models::Kernel::RationalQuadratic {
                 length_scale: 0.5,
                 alpha: 2.0
             }
@@ -277,7 +278,7 @@ fn records_round_trip_through_bags_and_fit_as_from_the_csv() {
     let expected = model_without_provenance(&from_csv);
     assert_eq!(model_without_provenance(&from_dir), expected);
     assert_eq!(model_without_provenance(&from_two), expected);
-    let set = user_model::UserModelSet::load(&from_dir).expect("loads");
+    let set = user_models::UserModelSet::load(&from_dir).expect("loads");
     assert_eq!(
         set.file()
             .clusters
@@ -320,7 +321,7 @@ fn node_over_dds_inside_the_namespace() {
     use std::time::Duration;
 
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/synthetic_study_c2.json");
-    let set = user_model::UserModelSet::load(&model).expect("loads the model");
+    let set = user_models::UserModelSet::load(&model).expect("loads the model");
     let dir = tempfile::tempdir().expect("temp dir");
     let node_params = dir.path().join("user_model.yaml");
     std::fs::write(

@@ -67,7 +67,7 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
         NodeShell::start(BEHAVIOUR_POLICY_NODE, &options)?;
     let learning = params.learning()?;
     let set =
-        user_model::UserModelSet::load(Path::new(&params.user_model_file)).with_context(|| {
+        user_models::UserModelSet::load(Path::new(&params.user_model_file)).with_context(|| {
             format!(
                 "user_model_file in {}",
                 options.params_path(shell.name()).display()

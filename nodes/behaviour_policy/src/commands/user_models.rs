@@ -35,7 +35,7 @@ pub fn load(
         check_order(&tables, &source)?;
         return Ok((tables, source));
     }
-    let set = user_model::UserModelSet::load(path)
+    let set = user_models::UserModelSet::load(path)
         .with_context(|| format!("loading user models from {}", path.display()))?;
     let source = format!("fitted user models {}", path.display());
     let tables = set.tables();

@@ -3,8 +3,8 @@
 //! feedback; level 1 on the first sequence).
 
 use super::{GameManager, Phase, Plan, PolicySilence, Timer};
-use crate::live_line::decision_reason;
 use crate::protocol::{LogLevel, Output};
+use qt_therapy_msgs::live_line::decision_reason;
 use qt_therapy_msgs::topics::BEHAVIOUR_POLICY_NODE;
 use qt_therapy_msgs::{BehaviourState, DecideActionRequest, DecideActionResponse, Validate};
 use sequence_game::{Action, Feedback, Level};

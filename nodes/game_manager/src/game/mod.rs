@@ -18,12 +18,12 @@ pub use recover::RECOVERED_STATUS;
 
 use crate::params::{GameManagerParams, ParamError};
 use crate::protocol::{Input, LogLevel, Output};
-use crate::scoring::EngagementLog;
 use crate::sequence::SessionRng;
 use crate::session_file::SessionEnd;
 use crate::utterances::{RobotAct, Utterances};
-use node_shell::heartbeat_watch::{HeartbeatWatch, Twins};
+use heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::sequence_engagement::EngagementLog;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
 use sequence_game::{Action, Emotion, Feedback, Level, State};

@@ -3,14 +3,14 @@
 //! its summary on finish, stop, emergency stop or shutdown.
 
 use super::{Current, GameManager, Phase, Timer};
-use crate::live_line::sequence_line;
 use crate::protocol::{LogLevel, Output};
-use crate::scoring::{parse_answer, score};
 use crate::session_file::{SequenceRecord, SessionEnd, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::live_line::sequence_line;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer};
 use sequence_game::{Emotion, State};
+use sequence_game::{parse_answer, score};
 
 impl GameManager {
     pub(super) fn on_answer(&mut self, a: TabletAnswer, now: i64) {
@@ -59,8 +59,12 @@ impl GameManager {
                 self.current.sequence_id
             ));
         }
-        parse_answer(&a.answer, a.response_time, self.current.sequence.len())
-            .map_err(|e| e.to_string())
+        parse_answer(
+            &a.answer,
+            f64::from(a.response_time),
+            self.current.sequence.len(),
+        )
+        .map_err(|e| e.to_string())
     }
 
     /// Answered or timed out: score once the engagement of the talking period is in.

@@ -8,7 +8,7 @@
 
 use super::GameManager;
 use crate::protocol::{LogLevel, Output};
-use node_shell::heartbeat_watch::Heard;
+use heartbeat_watch::Heard;
 use qt_therapy_msgs::Heartbeat;
 use qt_therapy_msgs::topics::BEHAVIOUR_POLICY_NODE;
 

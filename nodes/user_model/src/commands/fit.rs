@@ -4,7 +4,7 @@
 use anyhow::{Context, bail};
 use std::io::Write;
 use std::path::PathBuf;
-use user_model::{FitOptions, Kernel};
+use user_models::{FitOptions, Kernel};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -82,7 +82,7 @@ pub fn main(a: Args) -> anyhow::Result<()> {
         .collect::<Vec<_>>()
         .join(" ");
     let read =
-        user_model::data::read_sources(&a.data).with_context(|| format!("reading {data}"))?;
+        user_models::data::read_sources(&a.data).with_context(|| format!("reading {data}"))?;
     for w in &read.warnings {
         eprintln!("warning: {w}");
     }
@@ -105,14 +105,14 @@ pub fn main(a: Args) -> anyhow::Result<()> {
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
-    let set = user_model::fit(&records, &options).with_context(|| format!("fitting {data}"))?;
+    let set = user_models::fit(&records, &options).with_context(|| format!("fitting {data}"))?;
     let took = started.elapsed();
     set.save(&a.output)?;
     let figures = a
         .figures
         .clone()
         .unwrap_or_else(|| a.output.parent().map(PathBuf::from).unwrap_or_default());
-    let written = user_model::plot::write_figures(set.file(), &figures)
+    let written = crate::plot::write_figures(set.file(), &figures)
         .with_context(|| format!("writing figures to {}", figures.display()))?;
     // Written with errors returned (a closed pipe is not a panic).
     let mut out = std::io::stdout().lock();

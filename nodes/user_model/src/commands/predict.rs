@@ -5,7 +5,7 @@ use anyhow::Context;
 use sequence_game::{ModelInput, Outcome};
 use std::io::Write;
 use std::path::PathBuf;
-use user_model::UserModelSet;
+use user_models::UserModelSet;
 
 #[derive(clap::Args)]
 pub struct Args {

@@ -7,7 +7,8 @@ use node_shell::{NodeShell, ShellOptions, header_now};
 use qt_therapy_msgs::topics::{ASSIGN_CLUSTER, PREDICT_USER, USER_MODEL_INFO};
 use qt_therapy_msgs::{AssignClusterResponse, PredictUserResponse, UserModelInfo};
 use sequence_game::{Feedback, Level, ModelInput, Outcome};
-use user_model::{UserModelParams, UserModelSet};
+use user_model::UserModelParams;
+use user_models::UserModelSet;
 
 #[derive(clap::Args)]
 pub struct Args {

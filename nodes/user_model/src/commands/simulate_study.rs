@@ -4,7 +4,7 @@
 use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
-use user_model::simulate::{StudySpec, simulate_study};
+use user_models::simulate::{StudySpec, simulate_study};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -21,7 +21,7 @@ pub fn main(a: Args) -> anyhow::Result<()> {
         ..StudySpec::default()
     };
     let records = simulate_study(&spec);
-    user_model::data::write_csv(&a.output, &records)
+    user_models::data::write_csv(&a.output, &records)
         .with_context(|| format!("writing {}", a.output.display()))?;
     // Written with errors returned (a closed pipe is not a panic).
     let mut out = std::io::stdout().lock();

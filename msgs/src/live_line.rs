@@ -1,0 +1,151 @@
+//! The operator's view of a session: why the robot chose an action (the policy's decision,
+//! greedy or explored, with its Q-values; a therapist override; the safe fallback) and one
+//! line per scored sequence.
+
+use crate::{Decision, SequenceResult};
+use std::time::Duration;
+
+/// How long a listener waits for results after the FINISHED state: results travel on their
+/// own topic, so the last one may arrive just after the state that ends the session.
+pub const LAST_RESULT_GRACE: Duration = Duration::from_secs(2);
+
+const ACTION_NAMES: [&str; 5] = ["level 1", "level 2", "level 3", "encourage", "challenge"];
+const FEEDBACK_NAMES: [&str; 3] = ["none", "encouraging", "challenging"];
+
+/// Why the policy chose `d.action`, from its Q-values, probabilities and temperature.
+pub fn decision_reason(d: &Decision) -> String {
+    let q = |i: usize| d.q_values.get(i).copied().unwrap_or(f64::NAN);
+    let p = |i: usize| d.probabilities.get(i).copied().unwrap_or(f64::NAN);
+    let a = usize::from(d.action);
+    let name = ACTION_NAMES.get(a).copied().unwrap_or("?");
+    if d.explored {
+        // The best allowed action (probability > 0), to show what exploring gave up.
+        let best = (0..d.q_values.len())
+            .filter(|i| p(*i) > 0.0)
+            .max_by(|x, y| q(*x).total_cmp(&q(*y)))
+            .map(|i| format!("{} Q={:.2}", ACTION_NAMES.get(i).unwrap_or(&"?"), q(i)))
+            .unwrap_or_else(|| "?".into());
+        format!(
+            "policy explored: {name} (Q={:.2}, p={:.2}, T={:.1}; best {best}) [{}]",
+            q(a),
+            p(a),
+            d.temperature,
+            d.model_used
+        )
+    } else {
+        format!(
+            "policy greedy: {name} (Q={:.2}, p={:.2}, T={:.1}) [{}]",
+            q(a),
+            p(a),
+            d.temperature,
+            d.model_used
+        )
+    }
+}
+
+/// The reason as a listener who saw the result and (maybe) the decision before it tells it:
+/// the therapist's override, the policy's choice, or else the game's safe fallback (same
+/// level, no feedback), which is what a sequence without a decision was played with.
+pub fn reason_from_messages(r: &SequenceResult, decision: Option<&Decision>) -> String {
+    if r.overridden {
+        "therapist override".into()
+    } else if let Some(d) = decision {
+        decision_reason(d)
+    } else {
+        "safe fallback (no decision from the policy)".into()
+    }
+}
+
+/// One line per scored sequence: level, feedback, answer, score, engagement, reason.
+/// `planned` (the session's sequence count) is shown when known.
+pub fn sequence_line(r: &SequenceResult, planned: Option<u8>, reason: &str) -> String {
+    let answer = if r.timed_out {
+        "timeout"
+    } else if r.outcome == 1 {
+        "right"
+    } else {
+        "wrong"
+    };
+    let engagement = if r.engagement_per_second.is_empty() {
+        "E  n/a      ".to_string()
+    } else {
+        format!(
+            "E {:+.2} ({:>2} s)",
+            r.engagement,
+            r.engagement_per_second.len()
+        )
+    };
+    let planned = planned.map(|n| format!("/{n}")).unwrap_or_default();
+    format!(
+        "seq {:>2}{planned}  level {} ({} emotions)  feedback {:<11}  answer {:<7}  score {:+}  {engagement}  | {reason}",
+        r.sequence_index,
+        r.level,
+        2 * u16::from(r.level) + 1,
+        FEEDBACK_NAMES.get(usize::from(r.feedback)).unwrap_or(&"?"),
+        answer,
+        i16::from(r.level) * i16::from(r.outcome),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_and_reason_say_what_happened_and_why() {
+        let d = Decision {
+            action: 3,
+            q_values: vec![0.1, 0.9, 0.2, 0.5, 0.0],
+            probabilities: vec![0.2, 0.3, 0.1, 0.25, 0.15],
+            temperature: 12.0,
+            explored: true,
+            model_used: "cluster 0".into(),
+            ..Default::default()
+        };
+        let reason = decision_reason(&d);
+        assert_eq!(
+            reason,
+            "policy explored: encourage (Q=0.50, p=0.25, T=12.0; best level 2 Q=0.90) [cluster 0]"
+        );
+        let greedy = decision_reason(&Decision {
+            explored: false,
+            action: 1,
+            ..d.clone()
+        });
+        assert!(
+            greedy.starts_with("policy greedy: level 2 (Q=0.90"),
+            "{greedy}"
+        );
+        let r = SequenceResult {
+            sequence_index: 3,
+            level: 2,
+            feedback: 1,
+            outcome: -1,
+            engagement: 0.25,
+            engagement_per_second: vec![0.25; 14],
+            ..Default::default()
+        };
+        let line = sequence_line(&r, Some(10), &reason);
+        assert!(
+            line.starts_with("seq  3/10  level 2 (5 emotions)  feedback encouraging"),
+            "{line}"
+        );
+        assert!(
+            line.contains("answer wrong    score -2  E +0.25 (14 s)"),
+            "{line}"
+        );
+        let t = SequenceResult {
+            timed_out: true,
+            engagement_per_second: vec![],
+            ..r
+        };
+        assert!(sequence_line(&t, Some(10), "x").contains("answer timeout  score -2  E  n/a"));
+        assert!(sequence_line(&t, None, "x").starts_with("seq  3  level 2"));
+        assert!(reason_from_messages(&t, None).starts_with("safe fallback"));
+        let o = SequenceResult {
+            overridden: true,
+            ..t
+        };
+        assert_eq!(reason_from_messages(&o, Some(&d)), "therapist override");
+    }
+}
