@@ -7,7 +7,7 @@
 # Builds the fuzz targets with LLVM source-based coverage (-Cinstrument-coverage, the flags
 # `cargo fuzz coverage` uses, no sanitizer) into fuzz/target/coverage, runs every input once
 # (libFuzzer -runs=0) and prints llvm-cov's region and line totals for the suite's sources
-# (msgs/, nodes/) and for everything else, then the suite's files. Needs nightly's llvm-tools
+# (msgs/, libs/, nodes/, tools/) and for everything else, then the suite's files. Needs nightly's llvm-tools
 # (`rustup component add llvm-tools --toolchain nightly`).
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -58,7 +58,7 @@ summary, root, target, inputs = sys.argv[1], sys.argv[2] + "/", sys.argv[3], sys
 lcov = sys.argv[5]
 files = json.load(open(summary))["data"][0]["files"]
 ours = {f["filename"][len(root):]: f["summary"] for f in files
-        if f["filename"].startswith(root + "msgs/") or f["filename"].startswith(root + "nodes/")}
+        if f["filename"][len(root):].split("/")[0] in ("msgs", "libs", "nodes", "tools")}
 deps = [f["summary"] for f in files if f["filename"][len(root):] not in ours]
 def total(summaries, kind):
     c = sum(s[kind]["covered"] for s in summaries)

@@ -17,4 +17,5 @@ nm "$bin" | grep ' T __sanitizer_symbolize_pc' >/dev/null || {
 hash_seeded='hashbrown::(map::HashMap|raw::RawTable)<\(?(serde_saphyr::de::key_nodes::KeyFingerprint|usize), \(\)|KeyFingerprint as core::cmp::PartialEq>::eq'
 # The suite's crates, from their manifests (a dash in a package name is an underscore in a path).
 our_crates="^($(awk -F'"' '/^name = / { gsub("-", "_", $2); printf "%s%s", sep, $2; sep = "|"
-  nextfile }' ../msgs/Cargo.toml ../nodes/*/Cargo.toml Cargo.toml))\$"
+  nextfile }' ../msgs/Cargo.toml ../libs/*/Cargo.toml ../nodes/*/Cargo.toml ../tools/*/Cargo.toml \
+  Cargo.toml))\$"

@@ -33,7 +33,7 @@ CONSOLE_MAY_COMMAND=1 security/make_keystore.sh "$OUT/keystore" >/dev/null
 export ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce
 ROS_SECURITY_KEYSTORE=$(cd "$OUT/keystore" && pwd)
 export ROS_SECURITY_KEYSTORE
-tests/loopback-netns "$bin/launch" launch_scripts/simulated_session.launch.yaml \
+tests/loopback-netns "$bin/launch" launch_scripts/simulated_session.launch.yaml --log-dir "$OUT/logs" \
   bin:="$bin" out:="$OUT" "$@"
 "$bin/bag" info "$OUT/session.mcap"
 "$bin/session_report" "$OUT/session.mcap" --output "$OUT/report.html"

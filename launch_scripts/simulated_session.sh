@@ -23,7 +23,8 @@ echo "session output: $OUT"
 # In the background so the pages' address can be shown; Ctrl-C still reaches the launcher (same
 # process group), which stops every node; this script ignores it and goes on to the report.
 trap '' INT
-tests/loopback-netns target/debug/launch launch_scripts/simulated_session.launch.yaml out:="$OUT" "$@" &
+tests/loopback-netns target/debug/launch launch_scripts/simulated_session.launch.yaml \
+  --log-dir "$OUT/logs" out:="$OUT" "$@" &
 LAUNCH=$!
 # The tablet bridge serves both pages on the namespace's own loopback (params/tablet_bridge.yaml,
 # 127.0.0.1:8080): reachable only from inside it, e.g. with nsenter.

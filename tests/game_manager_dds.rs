@@ -1,6 +1,6 @@
 //! The `game_manager` binary plays a whole session over real DDS against the scripted test
 //! peer (policy, tablet, camera, therapist), both processes inside a private loopback-only
-//! network namespace (`tests/loopback-netns` at the workspace root): ten live lines on stdout,
+//! network namespace (`tests/loopback-netns` at the workspace root): ten live lines in its log,
 //! ten fsync'd records and a summary in the session directory, results over DDS.
 
 use game_manager::session_file::{SessionSummary, read_records};
@@ -70,8 +70,9 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
         "{context}"
     );
 
-    // The live view: a start line, ten sequence lines, an end line.
-    let live: Vec<&str> = gm_out.lines().filter(|l| l.starts_with("seq ")).collect();
+    // The live view, logged once each: a start line, ten sequence lines, an end line.
+    let gm_err = read("gm.err");
+    let live: Vec<&str> = gm_err.lines().filter(|l| l.contains(": seq ")).collect();
     assert_eq!(live.len(), 10, "{context}");
     assert!(live[2].contains("answer wrong"), "{context}");
     assert!(live[4].contains("answer timeout"), "{context}");
@@ -80,7 +81,7 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
         live[0].contains("policy greedy") && live[3].contains("policy explored"),
         "{context}"
     );
-    assert!(gm_out.contains("all sequences played"), "{context}");
+    assert!(gm_err.contains("all sequences played"), "{context}");
 
     // The results crossed over DDS.
     let peer = json_lines(&peer_out);
@@ -210,7 +211,7 @@ fn a_killed_node_loses_no_scored_sequence_and_its_restart_goes_on_with_the_same_
     // The restart took the same session over, paused, and went on at the resume with the
     // sequence after the last one on disk: one session, one set of files.
     assert!(
-        read("gm2.out").contains("recovered after a game manager restart"),
+        read("gm2.err").contains("recovered after a game manager restart"),
         "{context}"
     );
     assert_eq!(

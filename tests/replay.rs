@@ -614,6 +614,26 @@ fn by_stamp<M: Clone>(items: &[(i64, M)], header: impl Fn(&mut M) -> &mut Header
         .collect()
 }
 
+/// (stamp, result) pairs, as `by_stamp` makes them.
+type StampedResults = Vec<(i64, SequenceResult)>;
+
+/// Results with their engagement periods (message times, like their stamps) taken out, and
+/// the periods, so contents compare exactly and times within the tolerance.
+fn without_periods(items: StampedResults) -> (StampedResults, Vec<(i64, i64)>) {
+    items
+        .into_iter()
+        .map(|(t, mut r)| {
+            let period = (
+                r.engagement_period_start.to_nanos(),
+                r.engagement_period_end.to_nanos(),
+            );
+            r.engagement_period_start = Time::default();
+            r.engagement_period_end = Time::default();
+            ((t, r), period)
+        })
+        .unzip()
+}
+
 fn strings(reader: &BagReader, topic: &str) -> Vec<(i64, String)> {
     recorded::<StringMsg>(reader, topic)
         .into_iter()
@@ -648,12 +668,17 @@ fn recorded_commands_decisions_and_answers_give_the_recorded_game() {
             |m: &mut SequenceResult| &mut m.header,
         );
         assert_eq!(results.len(), sample.sequences, "{f}");
-        let d = compare_stamped(
-            &format!("{f}: sequence results"),
-            &by_stamp(&g.results, |m| &mut m.header),
-            &results,
-        );
+        let (replayed, replayed_periods) = without_periods(by_stamp(&g.results, |m| &mut m.header));
+        let (results, periods) = without_periods(results);
+        let d = compare_stamped(&format!("{f}: sequence results"), &replayed, &results);
         check("results", d);
+        let d = replayed_periods
+            .iter()
+            .zip(&periods)
+            .map(|(a, b)| (a.0 - b.0).abs().max((a.1 - b.1).abs()))
+            .max()
+            .unwrap_or(0);
+        check("results' engagement periods", d);
         let d = compare_stamped(
             &format!("{f}: tablet tasks"),
             &by_stamp(&g.tasks, |m: &mut TabletTask| &mut m.header),

@@ -34,28 +34,23 @@ fn a_whole_simulated_session_over_dds() {
     std::fs::create_dir_all(&out).expect("out dir");
     let o = out.display();
     let script = format!(
-        "{} launch_scripts/simulated_session.launch.yaml bin:={bin} out:={o} time_scale:=0.05 cluster:=0 > {o}/stdout.log 2> {o}/stderr.log; echo \"launch_exit=$?\"",
+        "{} launch_scripts/simulated_session.launch.yaml --log-dir {o}/logs bin:={bin} out:={o} time_scale:=0.05 cluster:=0 > {o}/stdout.log 2> {o}/stderr.log; echo \"launch_exit=$?\"",
         launch.display()
     );
     let Some(result) = run_in_loopback_netns(&script, Duration::from_secs(240)) else {
         return;
     };
     let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap_or_default();
+    let tail = |text: String| {
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(40)..].join("\n")
+    };
     let context = format!(
-        "{}\nstdout:\n{}\nstderr (tail):\n{}",
+        "{}\nstdout:\n{}\nstderr (tail):\n{}\ngame manager log (tail):\n{}",
         String::from_utf8_lossy(&result.stdout),
         read("stdout.log"),
-        {
-            let e = read("stderr.log");
-            e.lines()
-                .rev()
-                .take(40)
-                .collect::<Vec<_>>()
-                .into_iter()
-                .rev()
-                .collect::<Vec<_>>()
-                .join("\n")
-        }
+        tail(read("stderr.log")),
+        tail(read("logs/game_manager.log")),
     );
     assert!(
         String::from_utf8_lossy(&result.stdout).contains("launch_exit=0"),
@@ -71,6 +66,17 @@ fn a_whole_simulated_session_over_dds() {
         "{context}"
     );
     assert!(stdout.contains("finished: 10 sequences"), "{context}");
+    // The terminal shows each sequence once, with no colour codes, and no node's log records:
+    // those are in the nodes' log files.
+    assert!(!stdout.contains('\u{1b}'), "{context}");
+    assert!(!stdout.contains("[game_manager]"), "{context}");
+    let gm_log = read("logs/game_manager.log");
+    assert_eq!(
+        gm_log.lines().filter(|l| l.contains(": seq ")).count(),
+        10,
+        "the game manager logs each sequence once: {context}"
+    );
+    assert!(!gm_log.contains('\u{1b}'), "no colour in a log file");
 
     let reader = bag_file::BagReader::open(&out.join("session.mcap"))
         .expect("the recorder wrote a readable bag");
@@ -225,7 +231,7 @@ const LOSS_TIMEOUT_S: f64 = 4.0;
 /// over, paused; then the therapist resumes it from a second console, as on the tablet.
 fn kill_game_manager_step(after: u8, bin: &str) -> String {
     format!(
-        r#"wait_for '^\[therapist\] seq +{after} ' || fail
+        r#"wait_for '^\[therapist\] seq +{after}[/ ]' || fail
 pid=$(grep -oE "(started|restarted) game_manager \(pid [0-9]+\)" "$o/stderr.log" | tail -1 | grep -oE '[0-9]+')
 [ -n "$pid" ] || {{ echo "no pid for game_manager"; fail; }}
 echo "killed game_manager pid $pid at $EPOCHREALTIME"
@@ -243,7 +249,7 @@ echo "resumed session $session at $EPOCHREALTIME"
 /// until the game manager says it is back (the launcher respawns it 5 s later).
 fn kill_step(node: &str, after: u8) -> String {
     format!(
-        r#"wait_for '^\[therapist\] seq +{after} ' || fail
+        r#"wait_for '^\[therapist\] seq +{after}[/ ]' || fail
 pid=$(grep -oE "(started|restarted) {node} \(pid [0-9]+\)" "$o/stderr.log" | tail -1 | grep -oE '[0-9]+')
 [ -n "$pid" ] || {{ echo "no pid for {node}"; fail; }}
 cp "$o/q_tables/cluster_0.json" "$o/q_table_before_{node}.json" 2>/dev/null
@@ -646,17 +652,6 @@ fn respawn_readiness(stderr: &str, node: &str) -> String {
     let Some(respawn) = stderr.split(&format!("restarted {node} (pid")).nth(1) else {
         return "no respawn logged".into();
     };
-    // The nodes colour their logs: drop the escape sequences (ESC [ ... m).
-    let mut plain = String::with_capacity(respawn.len());
-    let mut chars = respawn.chars();
-    while let Some(c) = chars.next() {
-        if c == '\u{1b}' {
-            chars.by_ref().find(|&d| d == 'm');
-        } else {
-            plain.push(c);
-        }
-    }
-    let respawn = plain;
     let prefix = format!("[{node}] ");
     // Seconds of the day of a line `[node] 2026-12-02T12:27:38.436650Z  INFO message`.
     let time_of = |line: &str| -> Option<f64> {

@@ -666,14 +666,27 @@ fn check_bag(out: &Path, driven: &Driven) -> anyhow::Result<bool> {
             .decisions
             .push(d.message.step);
     }
+    // A command's answer stays in every state after it: count it where it first appears, by
+    // its typed fields (the status text is for people).
+    let mut last_answer: Option<(&str, u64, u8)> = None;
     for s in &states {
+        let m = &s.message;
+        let answer = (
+            m.command_session_id.as_str(),
+            m.command_id,
+            m.command_outcome,
+        );
+        if m.command_outcome != GameState::COMMAND_NONE && last_answer != Some(answer) {
+            let e = by_session.entry(group(&m.command_session_id)).or_default();
+            match m.command_outcome {
+                GameState::COMMAND_CARRIED_OUT => e.acks += 1,
+                GameState::COMMAND_REFUSED => e.rejections += 1,
+                // A repeat of a START carried out before: not carried out again.
+                _ => {}
+            }
+        }
+        last_answer = Some(answer);
         let e = by_session.entry(group(&s.message.session_id)).or_default();
-        if s.message.status.starts_with("session started") {
-            e.acks += 1;
-        }
-        if s.message.status.contains("rejected") || s.message.status.contains("command ") {
-            e.rejections += 1;
-        }
         if s.message.phase == GameState::FINISHED {
             e.finished = true;
         }

@@ -373,7 +373,7 @@ pub fn tablet_ws(data: &[u8]) {
                     panic!("the bridge published an invalid answer {a:?}: {e}");
                 }
             }
-            Output::Close(..) => {}
+            Output::Close(..) | Output::Log(..) => {}
         }
     }
 }

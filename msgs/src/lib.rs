@@ -6,6 +6,8 @@
 pub mod definition;
 pub mod live_line;
 pub mod messages;
+pub mod phases;
+pub mod results;
 pub mod sequence_engagement;
 pub mod services;
 mod standard;
@@ -14,6 +16,7 @@ pub mod validate;
 
 pub use definition::{MessageDefinition, RosType};
 pub use messages::*;
+pub use results::Tally;
 pub use services::*;
 pub use standard::{builtin_interfaces, std_msgs};
 pub use validate::{InvalidMessage, Validate};

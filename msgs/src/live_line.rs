@@ -3,27 +3,30 @@
 //! line per scored sequence.
 
 use crate::{Decision, SequenceResult};
+use sequence_game::{Action, Feedback, Level};
 use std::time::Duration;
 
 /// How long a listener waits for results after the FINISHED state: results travel on their
 /// own topic, so the last one may arrive just after the state that ends the session.
 pub const LAST_RESULT_GRACE: Duration = Duration::from_secs(2);
 
-const ACTION_NAMES: [&str; 5] = ["level 1", "level 2", "level 3", "encourage", "challenge"];
-const FEEDBACK_NAMES: [&str; 3] = ["none", "encouraging", "challenging"];
+/// An action index of a message in words, `?` if it is none of a1..a5.
+fn action_label(index: usize) -> String {
+    Action::new(index as i64).map_or_else(|_| "?".into(), Action::label)
+}
 
 /// Why the policy chose `d.action`, from its Q-values, probabilities and temperature.
 pub fn decision_reason(d: &Decision) -> String {
     let q = |i: usize| d.q_values.get(i).copied().unwrap_or(f64::NAN);
     let p = |i: usize| d.probabilities.get(i).copied().unwrap_or(f64::NAN);
     let a = usize::from(d.action);
-    let name = ACTION_NAMES.get(a).copied().unwrap_or("?");
+    let name = action_label(a);
     if d.explored {
         // The best allowed action (probability > 0), to show what exploring gave up.
         let best = (0..d.q_values.len())
             .filter(|i| p(*i) > 0.0)
             .max_by(|x, y| q(*x).total_cmp(&q(*y)))
-            .map(|i| format!("{} Q={:.2}", ACTION_NAMES.get(i).unwrap_or(&"?"), q(i)))
+            .map(|i| format!("{} Q={:.2}", action_label(i), q(i)))
             .unwrap_or_else(|| "?".into());
         format!(
             "policy explored: {name} (Q={:.2}, p={:.2}, T={:.1}; best {best}) [{}]",
@@ -56,12 +59,12 @@ pub fn reason_from_messages(r: &SequenceResult, decision: Option<&Decision>) -> 
     }
 }
 
-/// One line per scored sequence: level, feedback, answer, score, engagement, reason.
-/// `planned` (the session's sequence count) is shown when known.
-pub fn sequence_line(r: &SequenceResult, planned: Option<u8>, reason: &str) -> String {
+/// One line per scored sequence: its place in the session, level, feedback, answer, score,
+/// engagement, reason.
+pub fn sequence_line(r: &SequenceResult, reason: &str) -> String {
     let answer = if r.timed_out {
         "timeout"
-    } else if r.outcome == 1 {
+    } else if r.is_right() {
         "right"
     } else {
         "wrong"
@@ -75,15 +78,19 @@ pub fn sequence_line(r: &SequenceResult, planned: Option<u8>, reason: &str) -> S
             r.engagement_per_second.len()
         )
     };
-    let planned = planned.map(|n| format!("/{n}")).unwrap_or_default();
+    let planned = if r.sequences_planned > 0 {
+        format!("/{}", r.sequences_planned)
+    } else {
+        String::new()
+    };
     format!(
         "seq {:>2}{planned}  level {} ({} emotions)  feedback {:<11}  answer {:<7}  score {:+}  {engagement}  | {reason}",
         r.sequence_index,
         r.level,
-        2 * u16::from(r.level) + 1,
-        FEEDBACK_NAMES.get(usize::from(r.feedback)).unwrap_or(&"?"),
+        Level::new(r.level.into()).map_or(0, Level::sequence_length),
+        Feedback::new(r.feedback.into()).map_or("?", Feedback::name),
         answer,
-        i16::from(r.level) * i16::from(r.outcome),
+        r.score(),
     )
 }
 
@@ -118,6 +125,7 @@ mod tests {
         );
         let r = SequenceResult {
             sequence_index: 3,
+            sequences_planned: 10,
             level: 2,
             feedback: 1,
             outcome: -1,
@@ -125,7 +133,7 @@ mod tests {
             engagement_per_second: vec![0.25; 14],
             ..Default::default()
         };
-        let line = sequence_line(&r, Some(10), &reason);
+        let line = sequence_line(&r, &reason);
         assert!(
             line.starts_with("seq  3/10  level 2 (5 emotions)  feedback encouraging"),
             "{line}"
@@ -139,8 +147,12 @@ mod tests {
             engagement_per_second: vec![],
             ..r
         };
-        assert!(sequence_line(&t, Some(10), "x").contains("answer timeout  score -2  E  n/a"));
-        assert!(sequence_line(&t, None, "x").starts_with("seq  3  level 2"));
+        assert!(sequence_line(&t, "x").contains("answer timeout  score -2  E  n/a"));
+        let unknown = SequenceResult {
+            sequences_planned: 0,
+            ..t.clone()
+        };
+        assert!(sequence_line(&unknown, "x").starts_with("seq  3  level 2"));
         assert!(reason_from_messages(&t, None).starts_with("safe fallback"));
         let o = SequenceResult {
             overridden: true,

@@ -94,6 +94,11 @@ ros_message! {
         pub last_score: i8,
         pub policy_fallback: bool,
         pub status: String,
+        pub sequences_planned: u8,
+        pub command_session_id: String,
+        pub command_id: u64,
+        pub command_outcome: u8,
+        pub command_refusal: String,
     }
     constants {
         IDLE: u8 = 0,
@@ -105,6 +110,10 @@ ros_message! {
         FINISHED: u8 = 6,
         STOPPED: u8 = 7,
         EMERGENCY_STOPPED: u8 = 8,
+        COMMAND_NONE: u8 = 0,
+        COMMAND_CARRIED_OUT: u8 = 1,
+        COMMAND_REFUSED: u8 = 2,
+        COMMAND_ALREADY_CARRIED_OUT: u8 = 3,
     }
 }
 
@@ -128,7 +137,10 @@ ros_message! {
         pub activity_result: f32,
         pub engagement: f32,
         pub engagement_per_second: Vec<f32>,
+        pub engagement_period_start: Time,
+        pub engagement_period_end: Time,
         pub response_time: f32,
+        pub sequences_planned: u8,
     }
 }
 

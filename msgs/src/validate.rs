@@ -3,7 +3,8 @@
 
 use crate::messages::*;
 use crate::services::*;
-use sequence_game::{Emotion, State};
+use sequence_game::answer::{MAX_RESPONSE_TIME_S, MAX_SEQUENCE_LENGTH, parse_emotions};
+use sequence_game::{Level, State};
 
 /// Why a message was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -75,27 +76,32 @@ fn check_unit(
     Ok(())
 }
 
+/// A response time or task timeout: seconds in 0..=3600, as the answer rules say.
+fn check_response_time(message: &'static str, field: &str, v: f32) -> Result<(), InvalidMessage> {
+    check_unit(message, field, v, 0.0, MAX_RESPONSE_TIME_S as f32)
+}
+
 fn check_emotions(
     message: &'static str,
     field: &str,
     words: &[String],
 ) -> Result<(), InvalidMessage> {
-    if words.len() > 7 {
+    if words.len() > MAX_SEQUENCE_LENGTH {
         return fail(
             message,
-            format!("{field} has {} emotions, at most 7 allowed", words.len()),
+            format!(
+                "{field} has {} emotions, at most {MAX_SEQUENCE_LENGTH} allowed",
+                words.len()
+            ),
         );
     }
-    for (i, w) in words.iter().enumerate() {
-        if w.parse::<Emotion>().is_err() {
-            let shown: String = w.chars().take(20).collect();
-            return fail(
-                message,
-                format!("{field}[{i}] = {shown:?} is not happy, disgusted, sad or angry"),
-            );
-        }
-    }
-    Ok(())
+    // The answer rules' own message names the word, as `answer[i]`; name the field here.
+    parse_emotions(words).map(|_| ()).or_else(|e| {
+        fail(
+            message,
+            e.to_string().replacen("answer[", &format!("{field}["), 1),
+        )
+    })
 }
 
 impl BehaviourState {
@@ -209,7 +215,16 @@ impl Validate for GameState {
         check_range(M, "sequence_index", self.sequence_index, 0, 10)?;
         check_range(M, "level", self.level, 0, 3)?;
         check_range(M, "feedback", self.feedback, 0, 2)?;
-        check_range(M, "last_score", self.last_score, -3, 3)
+        check_range(M, "last_score", self.last_score, -3, 3)?;
+        check_range(M, "sequences_planned", self.sequences_planned, 0, 10)?;
+        check_id(M, "command_session_id", &self.command_session_id, false)?;
+        check_range(
+            M,
+            "command_outcome",
+            self.command_outcome,
+            Self::COMMAND_NONE,
+            Self::COMMAND_ALREADY_CARRIED_OUT,
+        )
     }
 }
 
@@ -219,6 +234,16 @@ impl Validate for SequenceResult {
         check_id(M, "session_id", &self.session_id, true)?;
         check_id(M, "user_id", &self.user_id, false)?;
         check_range(M, "sequence_index", self.sequence_index, 1, 10)?;
+        check_range(M, "sequences_planned", self.sequences_planned, 1, 10)?;
+        if self.sequence_index > self.sequences_planned {
+            return fail(
+                M,
+                format!(
+                    "sequence_index {} is past the session's {} sequences",
+                    self.sequence_index, self.sequences_planned
+                ),
+            );
+        }
         self.state
             .validate()
             .or_else(|e| fail(M, format!("state: {}", e.reason)))?;
@@ -227,7 +252,7 @@ impl Validate for SequenceResult {
         check_range(M, "feedback", self.feedback, 0, 2)?;
         check_emotions(M, "sequence", &self.sequence)?;
         check_emotions(M, "answer", &self.answer)?;
-        if self.sequence.len() != 2 * usize::from(self.level) + 1 {
+        if Level::new(self.level.into()).map(Level::sequence_length) != Ok(self.sequence.len()) {
             return fail(
                 M,
                 format!(
@@ -241,6 +266,12 @@ impl Validate for SequenceResult {
             return fail(M, format!("outcome = {} is not 1 or -1", self.outcome));
         }
         check_unit(M, "engagement", self.engagement, -1.0, 1.0)?;
+        if self.engagement_period_start.to_nanos() > self.engagement_period_end.to_nanos() {
+            return fail(
+                M,
+                "engagement_period_start is after engagement_period_end".to_string(),
+            );
+        }
         if let Some(e) = self
             .engagement_per_second
             .iter()
@@ -248,7 +279,7 @@ impl Validate for SequenceResult {
         {
             return fail(M, format!("engagement_per_second holds {e}"));
         }
-        check_unit(M, "response_time", self.response_time, 0.0, 3600.0)
+        check_response_time(M, "response_time", self.response_time)
     }
 }
 
@@ -256,11 +287,11 @@ impl Validate for TabletTask {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "TabletTask";
         check_id(M, "session_id", &self.session_id, true)?;
-        if ![3, 5, 7].contains(&self.length) {
+        if Level::from_sequence_length(self.length.into()).is_err() {
             return fail(M, format!("length = {} is not 3, 5 or 7", self.length));
         }
         check_emotions(M, "choices", &self.choices)?;
-        check_unit(M, "timeout", self.timeout, 0.0, 3600.0)
+        check_response_time(M, "timeout", self.timeout)
     }
 }
 
@@ -269,7 +300,7 @@ impl Validate for TabletAnswer {
         const M: &str = "TabletAnswer";
         check_id(M, "session_id", &self.session_id, true)?;
         check_emotions(M, "answer", &self.answer)?;
-        check_unit(M, "response_time", self.response_time, 0.0, 3600.0)
+        check_response_time(M, "response_time", self.response_time)
     }
 }
 

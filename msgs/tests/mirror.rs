@@ -292,6 +292,11 @@ fn every_type_round_trips_through_cdr_exactly() {
         last_score: -3,
         policy_fallback: true,
         status: "policy did not answer in 2 s".into(),
+        sequences_planned: 10,
+        command_session_id: "s".into(),
+        command_id: u64::MAX - 1,
+        command_outcome: GameState::COMMAND_REFUSED,
+        command_refusal: "already paused".into(),
     });
     round_trip(SequenceResult {
         header: stamp(),
@@ -313,7 +318,16 @@ fn every_type_round_trips_through_cdr_exactly() {
         activity_result: -1.0,
         engagement: 0.3,
         engagement_per_second: vec![0.1, -0.2, 1.0],
+        engagement_period_start: Time {
+            sec: 1_700_000_000,
+            nanosec: 5,
+        },
+        engagement_period_end: Time {
+            sec: 1_700_000_009,
+            nanosec: 999_999_999,
+        },
         response_time: 8.25,
+        sequences_planned: 5,
     });
     round_trip(TabletTask {
         header: stamp(),

@@ -86,3 +86,40 @@ fn levels_commands_and_states_are_range_checked() {
     };
     assert!(reason(&v).contains("6"));
 }
+
+#[test]
+fn a_result_knows_its_session_length_and_engagement_period() {
+    use qt_therapy_msgs::builtin_interfaces::Time;
+    let good = SequenceResult {
+        session_id: "s".into(),
+        sequence_index: 5,
+        sequences_planned: 5,
+        level: 1,
+        sequence: vec!["happy".into(); 3],
+        outcome: 1,
+        engagement_period_start: Time::from_nanos(1_000),
+        engagement_period_end: Time::from_nanos(2_000),
+        ..Default::default()
+    };
+    assert_eq!(good.validate(), Ok(()));
+    let past_the_end = SequenceResult {
+        sequence_index: 6,
+        ..good.clone()
+    };
+    assert!(reason(&past_the_end).contains("past the session's 5 sequences"));
+    let unknown_length = SequenceResult {
+        sequences_planned: 0,
+        ..good.clone()
+    };
+    assert!(reason(&unknown_length).contains("sequences_planned = 0"));
+    let backwards = SequenceResult {
+        engagement_period_start: Time::from_nanos(3_000),
+        ..good.clone()
+    };
+    assert!(reason(&backwards).contains("engagement_period_start is after"));
+    let refused = GameState {
+        command_outcome: 4,
+        ..Default::default()
+    };
+    assert!(reason(&refused).contains("command_outcome"));
+}

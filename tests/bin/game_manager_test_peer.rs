@@ -150,10 +150,11 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
         };
         emit(serde_json::json!({"event": "state", "phase": first.phase,
             "index": first.sequence_index, "status": first.status}));
+        // A session taken over from the files: paused, this session, and no command answered
+        // yet by the new process.
         if first.phase != GameState::PAUSED
-            || !first
-                .status
-                .starts_with(game_manager::game::RECOVERED_STATUS)
+            || first.session_id != cli.session
+            || first.command_outcome != GameState::COMMAND_NONE
         {
             emit(serde_json::json!({"event": "error", "what": "no recovered session"}));
             return Ok(2);

@@ -332,6 +332,11 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         last_score: 1,
         policy_fallback: false,
         status: "waiting".into(),
+        sequences_planned: 10,
+        command_session_id: "s1".into(),
+        command_id: 3,
+        command_outcome: GameState::COMMAND_REFUSED,
+        command_refusal: "already paused".into(),
     };
     message(dir, "GameState", "1", &game)?;
     message(dir, "SequenceResult", "0", &SequenceResult::default())?;
@@ -351,6 +356,7 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         engagement: 0.3,
         engagement_per_second: vec![0.1, 0.5],
         response_time: 3.5,
+        sequences_planned: 10,
         ..Default::default()
     };
     message(dir, "SequenceResult", "1", &result)?;

@@ -1,7 +1,10 @@
 //! Parses the MCAP records the reader uses (header, schema, channel, message, chunk, metadata,
 //! footer) from a record body, checking every length against the bytes that are really there.
-//! mcap 0.26's parser reserves whatever a string length claims (the fuzzer made it ask for
-//! 4 GiB), so a file cannot be trusted to it; it stays the writer.
+//! mcap 0.26's `sans_io::LinearReader` only frames records and leaves parsing to
+//! `mcap::parse_record`, whose strings (`McapString`, binrw `#[br(count = len)]`) call
+//! `reserve_exact(len)` before reading: a channel whose topic claims `u32::MAX` bytes asks for
+//! 4 GiB in a record of a few bytes, which `with_record_length_limit` does not prevent (the
+//! fuzzer found it with a chunk's compression string). mcap stays the writer.
 
 use mcap::records::op;
 use std::collections::BTreeMap;

@@ -1,8 +1,15 @@
 //! Walks an MCAP file record by record (sans-IO, over bytes in memory), keeping every message
 //! it can trust and stopping at the first bad record, which it names. A chunk is all or
-//! nothing: its records count only once it decompressed whole and passed its CRC. Framing,
-//! parsing and decompression are ours, bounded by the bytes present: mcap 0.26's readers trust
-//! lengths in the file (a corrupt one made its `ChunkReader` try to allocate 360 PB).
+//! nothing: its records count only once it decompressed whole and passed its CRC.
+//! Not mcap 0.26's `sans_io::LinearReader`, even with `with_record_length_limit` and
+//! `prevalidate_chunk_crcs`: its `LinearReadEvent::Record { data, opcode }` and errors (a bare
+//! `UnexpectedEof`) carry no offset and hide chunk boundaries (`in_chunk` is `pub(crate)`), so
+//! it cannot name the record where it stopped, and it streams a chunk whose CRC is 0 without
+//! decompressing it first (`prevalidate_chunk_crcs && state.crc != 0`), yielding records of a
+//! chunk that then fails. Its `decompress_inner` reserves (`RwBuf::reserve_exact`, zero-filled)
+//! whatever a chunk's `uncompressed_size` or an inner record's length claims, capped only by
+//! that limit (a 101-byte file made it allocate 256 MiB), where ours grows with the bytes that
+//! really decompress; its `ChunkReader`, which sets no limit, tried to allocate 360 PB.
 
 use crate::error::{BagError, RecordAt};
 use crate::parse::{Rec, parse};

@@ -81,6 +81,17 @@ impl<S: Subscriber> Layer<S> for RosoutLayer {
     }
 }
 
+/// Logs a line a node's sans-IO core asked for, at its level.
+pub fn log_at(level: Level, message: &str) {
+    match level {
+        Level::ERROR => tracing::error!("{message}"),
+        Level::WARN => tracing::warn!("{message}"),
+        Level::INFO => tracing::info!("{message}"),
+        Level::DEBUG => tracing::debug!("{message}"),
+        _ => tracing::trace!("{message}"),
+    }
+}
+
 /// Installs the process-wide subscriber; returns the sink to attach the node's rosout handle to.
 pub fn init_logging(node_name: &str) -> RosoutSink {
     let sink = RosoutSink::default();
@@ -98,6 +109,8 @@ pub fn init_logging(node_name: &str) -> RosoutSink {
         .with(
             tracing_subscriber::fmt::layer()
                 .with_writer(std::io::stderr)
+                // Colour for a person at a terminal, never into files, pipes or the journal.
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
                 .with_target(false),
         )
         .with(RosoutLayer {

@@ -399,6 +399,24 @@ impl Action {
         }
     }
 
+    /// The action as pages and translations key it: `level_1`, `level_2`, `level_3`,
+    /// `encourage`, `challenge`.
+    pub fn key(self) -> &'static str {
+        match self {
+            Action::SetLevel(l) if l == Level::ONE => "level_1",
+            Action::SetLevel(l) if l == Level::TWO => "level_2",
+            Action::SetLevel(_) => "level_3",
+            Action::Encourage => "encourage",
+            Action::Challenge => "challenge",
+        }
+    }
+
+    /// The action in words for a line of text: `level 1` .. `challenge`.
+    pub fn label(self) -> String {
+        self.key().replace('_', " ")
+    }
+
+    /// The paper's name: `a1 level 1` .. `a5 challenge`.
     pub fn name(self) -> &'static str {
         match self {
             Action::SetLevel(l) if l == Level::ONE => "a1 level 1",
@@ -493,6 +511,14 @@ impl fmt::Display for Emotion {
     }
 }
 
+/// FNV-1a of `id`: a stable number for a session or user id (std's hasher is seeded at random),
+/// so a seeded draw keyed by an id is the same in every process and release.
+pub fn stable_id_hash(id: &str) -> u64 {
+    id.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -553,5 +579,22 @@ mod tests {
             serde_json::from_str::<Action>("4").ok(),
             Some(Action::Challenge)
         );
+    }
+
+    #[test]
+    fn stable_id_hash_is_fnv_1a() {
+        // FNV-1a's published test vectors: the same in every process, unlike std's hasher.
+        assert_eq!(stable_id_hash(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(stable_id_hash("a"), 0xaf63_dc4c_8601_ec8c);
+    }
+
+    #[test]
+    fn actions_have_one_key_and_label_each() {
+        let keys: Vec<_> = Action::ALL.iter().map(|a| a.key()).collect();
+        assert_eq!(
+            keys,
+            ["level_1", "level_2", "level_3", "encourage", "challenge"]
+        );
+        assert_eq!(Action::SetLevel(Level::TWO).label(), "level 2");
     }
 }

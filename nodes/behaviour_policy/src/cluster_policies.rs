@@ -325,7 +325,7 @@ fn open_user_table(
         QTableOwner::User(user_id.to_string()),
         learning,
         mode,
-        seed ^ user_seed(user_id),
+        seed ^ sequence_game::stable_id_hash(user_id),
         || match cluster {
             OwnedTable::Ready(p) => Ok((
                 p.core().q_table().clone(),
@@ -340,14 +340,6 @@ fn open_user_table(
             )),
         },
     )
-}
-
-/// A user's seed offset: FNV-1a of the id, so it is the same in every process and release
-/// (std's hasher is randomly seeded).
-fn user_seed(user_id: &str) -> u64 {
-    user_id.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
 }
 
 /// Which Q-table made a decision, for the Decision message (the replay reads it back).
@@ -398,6 +390,7 @@ mod tests {
             activity_result: 2.0,
             engagement: 0.5,
             engagement_per_second: vec![0.5],
+            sequences_planned: 10,
             ..Default::default()
         }
     }
@@ -678,12 +671,5 @@ mod tests {
             "its cluster still learns"
         );
         assert_eq!(std::fs::read_to_string(&corrupt).expect("read"), CORRUPT);
-    }
-
-    #[test]
-    fn user_seeds_are_fixed_numbers() {
-        // FNV-1a's published test vectors: the same in every process, unlike std's hasher.
-        assert_eq!(user_seed(""), 0xcbf2_9ce4_8422_2325);
-        assert_eq!(user_seed("a"), 0xaf63_dc4c_8601_ec8c);
     }
 }

@@ -7,7 +7,7 @@ use crate::learning::Mode;
 use crate::policy_core::{Decision, Transition};
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{BehaviourState, SequenceResult};
-use sequence_game::{Action, GameError, SEQUENCES_PER_SESSION, State};
+use sequence_game::{Action, GameError, State};
 
 /// Why a `SequenceResult` cannot be learned from.
 #[derive(Debug, thiserror::Error)]
@@ -18,31 +18,24 @@ pub enum ResultError {
     Game(#[from] GameError),
 }
 
-/// The live game's transition: the next state's PS is this sequence's own score, and a
-/// sequence without a face seen counts as neutral engagement (0), so only RE speaks.
+/// The live game's transition: the next state's PS is this sequence's own score, a sequence
+/// without a face seen counts as neutral engagement (0), so only RE speaks, and the session's
+/// last sequence (its `sequences_planned`-th, whatever the session's length) is terminal.
 pub fn transition(r: &SequenceResult) -> Result<Transition, ResultError> {
     let state = r
         .state
         .to_state()
         .map_err(|e| ResultError::State(e.reason))?;
     let action = Action::new(r.action.into())?;
-    let next_state = State::new(
-        r.level.into(),
-        r.feedback.into(),
-        i64::from(r.level) * i64::from(r.outcome),
-    )?;
-    let engagement = if r.engagement_per_second.is_empty() {
-        0.0
-    } else {
-        f64::from(r.engagement)
-    };
+    let next_state = State::new(r.level.into(), r.feedback.into(), r.score().into())?;
+    let engagement = r.seen_engagement().unwrap_or(0.0);
     Ok(Transition {
         state,
         action,
         activity_result: f64::from(r.activity_result),
         engagement,
         next_state,
-        is_last: usize::from(r.sequence_index) >= SEQUENCES_PER_SESSION,
+        is_last: r.sequence_index >= r.sequences_planned,
     })
 }
 
@@ -78,6 +71,7 @@ mod tests {
     fn a_result_becomes_the_transition_the_game_played() {
         let r = SequenceResult {
             sequence_index: 10,
+            sequences_planned: 10,
             state: BehaviourState::from_state(State::START),
             action: 1,
             level: 2,
@@ -100,5 +94,23 @@ mod tests {
         assert_eq!((t.engagement, t.is_last), (0.5, false));
         let bad = SequenceResult { action: 9, ..r };
         assert!(transition(&bad).is_err());
+    }
+
+    #[test]
+    fn the_last_sequence_of_a_shorter_session_is_terminal() {
+        let r = |sequence_index| SequenceResult {
+            sequence_index,
+            sequences_planned: 5,
+            state: BehaviourState::from_state(State::START),
+            action: 1,
+            level: 2,
+            outcome: 1,
+            activity_result: 2.0,
+            ..Default::default()
+        };
+        let last: Vec<bool> = (1..=5)
+            .map(|i| transition(&r(i)).expect("valid").is_last)
+            .collect();
+        assert_eq!(last, [false, false, false, false, true]);
     }
 }

@@ -149,6 +149,7 @@ fn good_result(session: &str, cluster: i32) -> SequenceResult {
         engagement: 0.5,
         engagement_per_second: vec![0.25, 0.75],
         response_time: 3.0,
+        sequences_planned: 10,
         ..Default::default()
     }
 }

@@ -2,7 +2,7 @@
 //! under `cli/` (train, cross-validate, predict, synthesize, plot-study), and the DDS node,
 //! `run`.
 
-mod cli;
+mod commands;
 
 use clap::Parser;
 
@@ -10,14 +10,14 @@ use clap::Parser;
 #[command(name = "engagement_classifier", version, about)]
 struct Cli {
     #[command(subcommand)]
-    command: cli::Command,
+    command: commands::Command,
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     // The node sets up its own logging (stderr and /rosout) in the node shell.
-    if let cli::Command::Run(args) = cli.command {
-        return cli::run::run(args);
+    if let commands::Command::Run(args) = cli.command {
+        return commands::run::run(args);
     }
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -25,6 +25,7 @@ fn main() -> anyhow::Result<()> {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     cli.command.run()
 }

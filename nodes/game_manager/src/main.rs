@@ -19,7 +19,6 @@ use qt_therapy_msgs::topics::{
 };
 use qt_therapy_msgs::{DecideAction, GameState, SequenceResult, TabletTask};
 use std::collections::BTreeSet;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Duration;
 use tokio::sync::mpsc;
@@ -74,14 +73,20 @@ async fn main() -> anyhow::Result<()> {
     let (mut shell, mut params): (NodeShell, GameManagerParams) =
         NodeShell::start("game_manager", &args.shell)?;
     params.sessions_dir = sessions_dir.display().to_string();
-    let result = run(&mut shell, params).await;
+    // Parameter errors name the file actually read (--params-file, QT_PARAMS_DIR or params/).
+    let params_file = args.shell.params_path(shell.name());
+    let result = run(&mut shell, params, &params_file).await;
     shell.stop().await;
     result
 }
 
-async fn run(shell: &mut NodeShell, params: GameManagerParams) -> anyhow::Result<()> {
-    let mut core =
-        GameManager::new(params.clone()).context("checking the game_manager parameters")?;
+async fn run(
+    shell: &mut NodeShell,
+    params: GameManagerParams,
+    params_file: &std::path::Path,
+) -> anyhow::Result<()> {
+    let mut core = GameManager::new(params.clone())
+        .with_context(|| format!("parameter file {}", params_file.display()))?;
     let mut files = SessionFiles::new(&params.sessions_dir);
     let out = Outboxes {
         speech: shell.publisher(ROBOT_SPEECH)?,
@@ -294,19 +299,12 @@ impl Dispatch<'_> {
                         serde_json::to_string(&s).unwrap_or_default()
                     ),
                 },
-                Output::LiveLine(line) => {
-                    let mut stdout = std::io::stdout().lock();
-                    let _ = writeln!(stdout, "{line}");
-                    let _ = stdout.flush();
-                }
-                Output::Log {
-                    level: LogLevel::Info,
-                    message,
-                } => tracing::info!("{message}"),
-                Output::Log {
-                    level: LogLevel::Warn,
-                    message,
-                } => tracing::warn!("{message}"),
+                // The operator's line, once: a log record (terminal, log file, journal, /rosout).
+                Output::LiveLine(line) => match line.strip_prefix("!! ") {
+                    Some(alarm) => node_shell::logging::log_at(LogLevel::WARN, alarm),
+                    None => node_shell::logging::log_at(LogLevel::INFO, &line),
+                },
+                Output::Log { level, message } => node_shell::logging::log_at(level, &message),
             }
         }
     }

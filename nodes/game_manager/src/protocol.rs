@@ -33,12 +33,9 @@ pub enum Input {
     Shutdown { reason: String },
 }
 
-/// Severity of a log line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LogLevel {
-    Info,
-    Warn,
-}
+/// Severity of a log line: tracing's own, so every node's shell logs a core's lines alike
+/// (`node_shell::logging::log_at`).
+pub use tracing::Level as LogLevel;
 
 /// One thing the core wants done, in order.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,7 +68,9 @@ pub enum Output {
     Journal(Box<JournalEntry>),
     /// Write the session summary.
     Summary(Box<SessionSummary>),
-    /// The per-sequence line for the operator's terminal.
+    /// A line for the operator (a session started, each sequence scored, a node lost or back,
+    /// the session's end): logged once, as a warning when it starts with `!! ` (a person is
+    /// needed).
     LiveLine(String),
     Log {
         level: LogLevel,

@@ -6,13 +6,6 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sequence_game::{Emotion, Level};
 
-/// FNV-1a of the session id: a stable stream number, independent of the std hasher's seed.
-fn session_stream(session_id: &str) -> u64 {
-    session_id.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
-}
-
 /// The random generators of one session: sequences and line choices on separate streams, so
 /// the sequences of a session do not depend on how much feedback the policy chose.
 #[derive(Debug, Clone)]
@@ -23,7 +16,7 @@ pub struct SessionRng {
 
 impl SessionRng {
     pub fn new(seed: i64, session_id: &str) -> Self {
-        let stream = session_stream(session_id);
+        let stream = sequence_game::stable_id_hash(session_id);
         let mut sequences = ChaCha8Rng::seed_from_u64(seed as u64);
         sequences.set_stream(stream);
         // The line stream differs from every sequence stream in its seed.

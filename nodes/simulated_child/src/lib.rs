@@ -147,13 +147,6 @@ pub struct SimulatedChild {
     next_frame_ns: Option<i64>,
 }
 
-fn hash_session(id: &str) -> u64 {
-    // FNV-1a: a stable key for the session id, independent of the std hasher's seed.
-    id.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
-}
-
 impl SimulatedChild {
     pub fn new(params: ChildParams, model: UserModelTable) -> Result<Self, ChildError> {
         params.validate()?;
@@ -212,7 +205,7 @@ impl SimulatedChild {
     pub fn on_game_state(&mut self, state: &GameState) {
         if state.session_id != self.session_id {
             self.session_id = state.session_id.clone();
-            self.session_key = hash_session(&state.session_id);
+            self.session_key = sequence_game::stable_id_hash(&state.session_id);
             self.plan = None;
         }
         let presenting = matches!(

@@ -1,16 +1,16 @@
 // The therapist tablet: unlock with the PIN, then watch the game (state, engagement trend,
 // each decision with its Q-values, each result) and command it. The bridge checks everything
-// again; the buttons' enabled state is only a hint.
+// again; the buttons' enabled state is only a hint. The game's rules (which phases are a
+// sequence under way, the actions and feedback by name, a sequence's score and the session's
+// total) come from the bridge; this page only shows and translates them.
 "use strict";
 const $ = (id) => document.getElementById(id);
-const RUNNING = ["deciding", "giving_feedback", "saying_sequence", "waiting_for_answer"];
-const ACTIONS = () => ["L1", "L2", "L3", t("encourage"), t("challenge")];
-const FEEDBACK = () => [t("none"), t("encouraging"), t("challenging")];
 const TREND_SECONDS = 300;
 
 let pin = null;        // kept in memory only, so a reconnect can log in again
 let loggedIn = false;
 let phase = "unknown";
+let running = false;
 let engagement = [];   // {t, smoothed, mean, has_faces}
 
 function show(view) {
@@ -32,7 +32,6 @@ function command(kind, extra) {
 }
 
 function updateButtons() {
-  const running = RUNNING.includes(phase);
   $("start").disabled = running || phase === "paused";
   $("pause").disabled = !running;
   $("resume").disabled = phase !== "paused";
@@ -46,13 +45,14 @@ function fmt(x, digits) {
 
 function showGame(g) {
   phase = g.phase;
+  running = g.running;
   const badge = $("phase");
   badge.textContent = t("phase_" + g.phase);
   badge.dataset.phase = g.phase;
   $("session-label").textContent = g.session_id ? t("session") + " " + g.session_id : "";
-  $("g-sequence").textContent = g.sequence_index + " / 10";
+  $("g-sequence").textContent = g.sequence_index + " / " + (g.sequences_planned || "–");
   $("g-level").textContent = g.level || "–";
-  $("g-feedback").textContent = FEEDBACK()[g.feedback] || "–";
+  $("g-feedback").textContent = g.sequence_index ? t(g.feedback_name) : "–";
   $("g-score").textContent = g.last_score;
   $("g-fallback").textContent = g.policy_fallback ? t("yes") : t("no");
   $("g-user").textContent = g.user_id ? g.user_id + " (cluster " + g.cluster + ")" : "–";
@@ -75,7 +75,7 @@ function qValues(d) {
   box.className = "qvalues";
   const finite = d.q_values.filter((q) => typeof q === "number");
   const lo = Math.min(0, ...finite), hi = Math.max(0, ...finite);
-  const short = ["L1", "L2", "L3", t("encourage_short"), t("challenge_short")];
+
   d.q_values.forEach((q, i) => {
     const item = document.createElement("div");
     item.className = "q" + (i === d.action ? " chosen" : "") +
@@ -84,13 +84,13 @@ function qValues(d) {
     bar.className = "bar";
     bar.style.height = (hi > lo && typeof q === "number" ? 100 * (q - lo) / (hi - lo) : 0) + "%";
     const name = document.createElement("b");
-    name.textContent = short[i];
+    name.textContent = t(d.action_names[i] + "_short");
     const value = document.createElement("span");
     value.textContent = fmt(q, 2);
     const p = document.createElement("small");
     p.textContent = "p " + fmt(d.probabilities[i], 2);
     item.append(bar, name, value, p);
-    item.title = ACTIONS()[i];
+    item.title = t(d.action_names[i]);
     box.appendChild(item);
   });
   return box;
@@ -104,7 +104,7 @@ function addDecision(d) {
   cell(row, d.step);
   cell(row, "(" + d.state.join(", ") + ")");
   const chosen = document.createElement("div");
-  chosen.textContent = ACTIONS()[d.action] + " → L" + d.level + ", " + FEEDBACK()[d.feedback];
+  chosen.textContent = t(d.action_names[d.action]) + " → L" + d.level + ", " + t(d.feedback_name);
   const mode = document.createElement("small");
   mode.className = d.explored ? "explored" : "greedy";
   mode.textContent = (d.explored ? t("explored") : t("greedy")) + " · T " + fmt(d.temperature, 2);
@@ -135,9 +135,7 @@ function addResult(r) {
   row.dataset.session = r.session_id;
   const outcome = r.timed_out ? "timeout" : r.outcome === 1 ? "right" : "wrong";
   row.className = "result " + outcome;
-  // The paper's score of a sequence is L * O (a timeout is a wrong answer).
-  row.dataset.score = r.outcome === 1 ? r.level : -r.level;
-  row.dataset.level = r.level;
+  row.dataset.score = r.score;
   cell(row, r.sequence_index);
   cell(row, r.level + (r.overridden ? " *" : ""));
   // What the robot said above what the child tapped, face under face.
@@ -149,17 +147,8 @@ function addResult(r) {
   cell(row, fmt(r.engagement, 2));
   cell(row, fmt(r.response_time, 1));
   body.prepend(row);
-  showTotal();
-}
-
-// The session's score so far, sum of L * O, against its maximum, sum of L.
-function showTotal() {
-  let score = 0, max = 0;
-  for (const row of $("results").tBodies[0].rows) {
-    score += Number(row.dataset.score);
-    max += Number(row.dataset.level);
-  }
-  $("g-total").textContent = score + " / " + max;
+  // The session's score so far against the best its levels allow, as the bridge counts it.
+  $("g-total").textContent = r.session_score + " / " + r.session_max_score;
 }
 
 function drawTrend() {

@@ -16,6 +16,7 @@ use qt_therapy_msgs::{
 };
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
+use tracing::Level;
 
 /// One WebSocket connection, numbered by the bridge.
 pub type ClientId = u64;
@@ -37,6 +38,13 @@ pub enum Output {
     Close(ClientId, String),
     Command(TherapistCommand),
     Answer(TabletAnswer),
+    /// A line for the log (the shell logs it with `node_shell::logging::log_at`).
+    Log(Level, String),
+}
+
+/// A log line as an output.
+pub(crate) fn log(level: Level, message: String) -> Output {
+    Output::Log(level, message)
 }
 
 /// A DDS message the bridge listens to.
@@ -81,6 +89,8 @@ pub struct Bridge {
     pub(crate) engagement: VecDeque<EngagementPoint>,
     pub(crate) decisions: VecDeque<DecisionView>,
     pub(crate) results: VecDeque<ResultView>,
+    /// The results of the session the newest result belongs to, for its running tally.
+    pub(crate) session_results: Vec<SequenceResult>,
     /// The session commands go to: the game's, or the one this bridge just started.
     pub(crate) current_session: Option<String>,
     pub(crate) command_ids: CommandIds,
@@ -106,6 +116,7 @@ impl Bridge {
             engagement: VecDeque::new(),
             decisions: VecDeque::new(),
             results: VecDeque::new(),
+            session_results: Vec::new(),
             current_session: None,
             command_ids: CommandIds::default(),
             last_emergency_stop: None,
@@ -120,7 +131,6 @@ impl Bridge {
                 "too many tablet connections (at most {})",
                 self.params.max_clients
             );
-            tracing::warn!(?role, "connection refused: {reason}");
             return Err(reason);
         }
         let id = self.next_id;
@@ -137,8 +147,7 @@ impl Bridge {
                 last_notice: None,
             },
         );
-        tracing::info!(client = id, ?role, "page connected");
-        let mut out = Vec::new();
+        let mut out = vec![log(Level::INFO, format!("page {id} ({role:?}) connected"))];
         match role {
             Role::Child => {
                 if let Some(v) = self.child_view() {
@@ -151,9 +160,13 @@ impl Bridge {
         Ok((id, out))
     }
 
-    pub fn disconnect(&mut self, id: ClientId) {
-        if let Some(c) = self.clients.remove(&id) {
-            tracing::info!(client = id, role = ?c.role, "page disconnected");
+    pub fn disconnect(&mut self, id: ClientId) -> Vec<Output> {
+        match self.clients.remove(&id) {
+            Some(c) => vec![log(
+                Level::INFO,
+                format!("page {id} ({:?}) disconnected", c.role),
+            )],
+            None => Vec::new(),
         }
     }
 
@@ -219,7 +232,10 @@ impl Bridge {
         c.dropped_in_a_row += 1;
         if c.dropped_in_a_row >= max_dropped {
             let reason = format!("closed: {max_dropped} messages in a row over the rate limit");
-            tracing::warn!(client = id, role = ?c.role, "{reason}");
+            out.push(log(
+                Level::WARN,
+                format!("page {id} ({:?}): {reason}", c.role),
+            ));
             out.push(Output::Send(
                 id,
                 ServerMessage::Rejected {
@@ -237,7 +253,10 @@ impl Bridge {
                 "too many messages: at most {rate} per second (bursts of {burst}); {} dropped",
                 c.dropped_in_a_row
             );
-            tracing::warn!(client = id, role = ?c.role, "{reason}");
+            out.push(log(
+                Level::WARN,
+                format!("page {id} ({:?}): {reason}", c.role),
+            ));
             out.push(Output::Send(id, ServerMessage::Rejected { reason }));
         }
         false
@@ -293,7 +312,10 @@ impl Bridge {
     /// Refuses what page `id` sent: logged, and the reason goes back to the page.
     pub(crate) fn reject(&self, id: ClientId, reason: String, out: &mut Vec<Output>) {
         let role = self.clients.get(&id).map(|c| c.role);
-        tracing::warn!(client = id, ?role, "rejected: {reason}");
+        out.push(log(
+            Level::WARN,
+            format!("page {id} ({role:?}) rejected: {reason}"),
+        ));
         out.push(Output::Send(id, ServerMessage::Rejected { reason }));
     }
 
@@ -339,5 +361,4 @@ impl Bridge {
 }
 
 #[cfg(test)]
-#[path = "core_tests/mod.rs"]
 mod tests;

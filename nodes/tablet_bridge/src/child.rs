@@ -2,13 +2,14 @@
 //! the task on screen, is its first answer, came in time, and holds exactly the number of
 //! emotions asked, each one offered by the task.
 
-use crate::bridge::{Bridge, ClientId, Now, Output};
+use crate::bridge::{Bridge, ClientId, Now, Output, log};
 use crate::protocol::{Role, ServerMessage};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, TabletAnswer, Validate};
-use sequence_game::Emotion;
+use sequence_game::parse_answer;
 use std::time::Duration;
+use tracing::Level;
 
 /// Network and rendering slack past the task's timeout before an answer counts as late.
 pub const ANSWER_GRACE: Duration = Duration::from_secs(2);
@@ -29,13 +30,13 @@ impl Bridge {
                 if let Some(t) = self.task.as_mut() {
                     t.answered = true;
                 }
-                tracing::info!(
-                    client = id,
-                    session = %message.session_id,
-                    sequence_id,
-                    answer = ?message.answer,
-                    "answer sent"
-                );
+                out.push(log(
+                    Level::INFO,
+                    format!(
+                        "page {id}: answer to sequence {sequence_id} of session {:?} sent: {:?}",
+                        message.session_id, message.answer
+                    ),
+                ));
                 out.push(Output::Send(
                     id,
                     ServerMessage::Accepted {
@@ -97,27 +98,16 @@ impl Bridge {
                 ));
             }
         }
-        if answer.len() != usize::from(task.length) {
+        let emotions = parse_answer(answer, response_time, usize::from(task.length))
+            .map_err(|e| e.to_string())?;
+        if let Some((i, e)) = emotions
+            .iter()
+            .enumerate()
+            .find(|(_, e)| !task.choices.iter().any(|c| c == e.name()))
+        {
             return Err(format!(
-                "the answer has {} emotions, the task asks for {}",
-                answer.len(),
-                task.length
-            ));
-        }
-        for (i, word) in answer.iter().enumerate() {
-            let shown: String = word.chars().take(20).collect();
-            let emotion: Emotion = word.parse().map_err(|_| {
-                format!("answer[{i}] = {shown:?} is not one of happy, disgusted, sad, angry")
-            })?;
-            if !task.choices.iter().any(|c| c == emotion.name()) {
-                return Err(format!(
-                    "answer[{i}] = {shown:?} is not offered by this task"
-                ));
-            }
-        }
-        if !(response_time.is_finite() && (0.0..=3600.0).contains(&response_time)) {
-            return Err(format!(
-                "response_time = {response_time} is not a number of seconds in 0..=3600"
+                "answer[{i}] = {:?} is not offered by this task",
+                e.name()
             ));
         }
         let message = TabletAnswer {

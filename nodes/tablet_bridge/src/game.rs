@@ -2,12 +2,11 @@
 //! become what each page shows; a task stays open until it is answered, replaced, or the game
 //! moves to a phase where no answer can count.
 
-use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output};
-use crate::protocol::{
-    DecisionView, EngagementPoint, ResultView, Role, ServerMessage, TaskView, phase_name,
-};
-use qt_therapy_msgs::{GameState, TabletTask};
+use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output, log};
+use crate::protocol::{DecisionView, EngagementPoint, ResultView, Role, ServerMessage, TaskView};
+use qt_therapy_msgs::{GameState, TabletTask, Tally};
 use std::collections::VecDeque;
+use tracing::Level;
 
 /// Decisions and results kept for a therapist page that logs in mid-session.
 const HISTORY: usize = 50;
@@ -25,7 +24,18 @@ impl Bridge {
                 self.broadcast(Role::Therapist, &ServerMessage::Decision(view), &mut out);
             }
             DdsInput::Result(r) => {
-                let view = ResultView::of(&r);
+                if self
+                    .session_results
+                    .last()
+                    .is_some_and(|last| last.session_id != r.session_id)
+                {
+                    self.session_results.clear();
+                }
+                // A result delivered again (the topic keeps its history) counts once.
+                self.session_results
+                    .retain(|k| k.sequence_index != r.sequence_index);
+                self.session_results.push(r.clone());
+                let view = ResultView::of(&r, &Tally::of(&self.session_results));
                 push_for_session(&mut self.results, view.clone(), |v| &v.session_id);
                 self.broadcast(Role::Therapist, &ServerMessage::Result(view), &mut out);
             }
@@ -66,7 +76,7 @@ impl Bridge {
         self.show_game(out);
         if self.task.is_some() && (ended || other_session) {
             self.task = None;
-            let reason = format!("the game is {}", phase_name(phase));
+            let reason = format!("the game is {}", GameState::phase_name(phase));
             self.broadcast(Role::Child, &ServerMessage::NoTask { reason }, out);
         }
     }
@@ -75,7 +85,10 @@ impl Bridge {
         if let Some((session, last)) = &self.last_task {
             // Transient-local topics re-deliver the last task; older ones are stale.
             if *session == t.session_id && t.sequence_id <= *last {
-                tracing::debug!(sequence_id = t.sequence_id, "task already seen; ignored");
+                out.push(log(
+                    Level::DEBUG,
+                    format!("task {} already seen; ignored", t.sequence_id),
+                ));
                 return;
             }
         }
@@ -85,11 +98,20 @@ impl Bridge {
                 GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
             );
             if over && g.session_id == t.session_id {
-                tracing::info!(session = %t.session_id, "task for an ended session; ignored");
+                out.push(log(
+                    Level::INFO,
+                    format!("task for the ended session {:?}; ignored", t.session_id),
+                ));
                 return;
             }
         }
-        tracing::info!(session = %t.session_id, sequence_id = t.sequence_id, length = t.length, "new task");
+        out.push(log(
+            Level::INFO,
+            format!(
+                "new task {} of session {:?}, {} emotions",
+                t.sequence_id, t.session_id, t.length
+            ),
+        ));
         self.last_task = Some((t.session_id.clone(), t.sequence_id));
         self.broadcast(Role::Child, &ServerMessage::Task(TaskView::of(&t)), out);
         self.task = Some(OpenTask {

@@ -46,7 +46,13 @@ async fn main() -> anyhow::Result<()> {
     if let Ok(pin) = std::env::var("QT_TABLET_PIN") {
         params.pin = pin;
     }
-    params.validate()?;
+    // The file actually read (--params-file, QT_PARAMS_DIR or params/) is named, not the default.
+    params.validate().with_context(|| {
+        format!(
+            "{} (or QT_TABLET_PIN for the pin)",
+            cli.shell.params_path(shell.name()).display()
+        )
+    })?;
     let result = {
         let commands = shell.publisher(THERAPIST_COMMAND)?;
         let answers = shell.publisher(TABLET_ANSWER)?;

@@ -52,7 +52,7 @@ impl Default for TabletBridgeParams {
 
 /// A parameter value the bridge cannot run with.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("params/tablet_bridge.yaml: tablet_bridge.ros__parameters.{key}: {reason}")]
+#[error("tablet_bridge parameter {key}: {reason}")]
 pub struct InvalidParameter {
     pub key: &'static str,
     pub reason: String,

@@ -2,7 +2,13 @@
 //! parsed strictly (unknown types and fields, wrong types and missing fields are rejected with
 //! serde's reason); outgoing ones are views of the DDS messages the pages need.
 
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask};
+use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, Tally};
+use sequence_game::{ACTION_COUNT, Action, Feedback};
+
+/// A feedback code's name, `unknown` outside 0..=2.
+fn feedback_name(feedback: u8) -> &'static str {
+    Feedback::new(feedback.into()).map_or("unknown", Feedback::name)
+}
 use serde::{Deserialize, Serialize};
 
 /// Which page a connection belongs to.
@@ -109,23 +115,6 @@ pub enum ServerMessage {
     Result(ResultView),
 }
 
-/// The game-manager phases by name, indexed by `GameState.phase`.
-pub const PHASES: [&str; 9] = [
-    "idle",
-    "deciding",
-    "giving_feedback",
-    "saying_sequence",
-    "waiting_for_answer",
-    "paused",
-    "finished",
-    "stopped",
-    "emergency_stopped",
-];
-
-pub fn phase_name(phase: u8) -> &'static str {
-    PHASES.get(usize::from(phase)).copied().unwrap_or("unknown")
-}
-
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct GameView {
     pub phase: &'static str,
@@ -135,24 +124,33 @@ pub struct GameView {
     pub sequence_index: u8,
     pub level: u8,
     pub feedback: u8,
+    /// The feedback's name (`none`, `encouraging`, `challenging`), which the page translates.
+    pub feedback_name: &'static str,
     pub last_score: i8,
     pub policy_fallback: bool,
     pub status: String,
+    /// A sequence is under way (the page enables pause, stop and override on it).
+    pub running: bool,
+    /// Sequences this session plays.
+    pub sequences_planned: u8,
 }
 
 impl GameView {
     pub fn of(g: &GameState) -> Self {
         GameView {
-            phase: phase_name(g.phase),
+            phase: GameState::phase_name(g.phase),
             session_id: g.session_id.clone(),
             user_id: g.user_id.clone(),
             cluster: g.user_model_cluster,
             sequence_index: g.sequence_index,
             level: g.level,
             feedback: g.feedback,
+            feedback_name: feedback_name(g.feedback),
             last_score: g.last_score,
             policy_fallback: g.policy_fallback,
             status: g.status.clone(),
+            running: GameState::is_running(g.phase),
+            sequences_planned: g.sequences_planned,
         }
     }
 
@@ -225,6 +223,9 @@ pub struct DecisionView {
     pub explored: bool,
     pub exploitation_only: bool,
     pub model_used: String,
+    /// The actions' keys in index order (`level_1` .. `challenge`), which the page translates.
+    pub action_names: [&'static str; ACTION_COUNT],
+    pub feedback_name: &'static str,
 }
 
 impl DecisionView {
@@ -248,6 +249,8 @@ impl DecisionView {
             explored: d.explored,
             exploitation_only: d.exploitation_only,
             model_used: d.model_used.clone(),
+            action_names: Action::ALL.map(Action::key),
+            feedback_name: feedback_name(d.feedback),
         }
     }
 }
@@ -265,10 +268,16 @@ pub struct ResultView {
     pub timed_out: bool,
     pub engagement: f32,
     pub response_time: f32,
+    /// The paper's score of the sequence, L·O.
+    pub score: i32,
+    /// The session's score so far and the best it could be with its levels.
+    pub session_score: i32,
+    pub session_max_score: i32,
 }
 
 impl ResultView {
-    pub fn of(r: &SequenceResult) -> Self {
+    /// `r` with the tally of its session so far (`r` included).
+    pub fn of(r: &SequenceResult, session: &Tally) -> Self {
         ResultView {
             session_id: r.session_id.clone(),
             sequence_index: r.sequence_index,
@@ -281,6 +290,9 @@ impl ResultView {
             timed_out: r.timed_out,
             engagement: r.engagement,
             response_time: r.response_time,
+            score: r.score(),
+            session_score: session.score,
+            session_max_score: session.max_score,
         }
     }
 }
@@ -374,6 +386,6 @@ mod tests {
         assert_eq!(v["type"], "game");
         assert_eq!(v["phase"], "waiting_for_answer");
         assert_eq!(v["user_id"], "");
-        assert_eq!(phase_name(200), "unknown");
+        assert_eq!(GameState::phase_name(200), "unknown");
     }
 }

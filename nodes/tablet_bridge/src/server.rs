@@ -301,6 +301,7 @@ async fn run_core(
                         outputs
                     }
                     Err(reason) => {
+                        tracing::warn!(?role, "connection refused: {reason}");
                         let _ = reply.send(Err(reason));
                         continue;
                     }
@@ -309,14 +310,14 @@ async fn run_core(
                 Event::Binary(id, len) => core.ws_binary(id, len, now(clock)),
                 Event::Disconnect(id) => {
                     pages.remove(&id);
-                    core.disconnect(id);
-                    continue;
+                    core.disconnect(id)
                 }
             },
             Some(input) = dds_in.recv() => core.dds(input, now(clock)),
             else => break,
         };
-        for output in outputs {
+        let mut outputs = std::collections::VecDeque::from(outputs);
+        while let Some(output) = outputs.pop_front() {
             match output {
                 Output::Send(id, message) => {
                     let Some(page) = pages.get(&id) else { continue };
@@ -334,7 +335,7 @@ async fn run_core(
                             "page too slow or gone: {OUTGOING_QUEUE} messages queued; disconnected"
                         );
                         pages.remove(&id);
-                        core.disconnect(id);
+                        outputs.extend(core.disconnect(id));
                     }
                 }
                 Output::Close(id, reason) => {
@@ -348,6 +349,7 @@ async fn run_core(
                 Output::Answer(a) => {
                     let _ = publish.send(Publish::Answer(a)).await;
                 }
+                Output::Log(level, message) => node_shell::logging::log_at(level, &message),
             }
         }
     }

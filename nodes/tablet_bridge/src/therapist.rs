@@ -1,14 +1,15 @@
 //! The therapist page's side of the core: PIN login, and commands turned into
 //! `TherapistCommand`s with the session they are for and a command id that only increases.
 
-use crate::bridge::{Bridge, ClientId, Now, Output};
+use crate::bridge::{Bridge, ClientId, Now, Output, log};
 use crate::limits::pin_matches;
-use crate::protocol::{CommandKind, Role, ServerMessage, phase_name};
+use crate::protocol::{CommandKind, Role, ServerMessage};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, TherapistCommand, Validate};
 use std::collections::VecDeque;
 use std::time::Duration;
+use tracing::Level;
 
 /// Sessions whose last command id is remembered.
 const SESSIONS_REMEMBERED: usize = 16;
@@ -65,7 +66,7 @@ impl Bridge {
             c.logged_in = true;
             c.pin_failures = 0;
         }
-        tracing::info!(client = id, "therapist page logged in");
+        out.push(log(Level::INFO, format!("page {id}: therapist logged in")));
         self.therapist_snapshot(id, out);
     }
 
@@ -80,7 +81,7 @@ impl Bridge {
         self.reject(id, "wrong PIN".into(), out);
         if failures >= max {
             let reason = format!("closed after {failures} wrong PINs");
-            tracing::warn!(client = id, "{reason}");
+            out.push(log(Level::WARN, format!("page {id}: {reason}")));
             out.push(Output::Close(id, reason));
             self.clients.remove(&id);
         }
@@ -142,7 +143,13 @@ impl Bridge {
         if kind == CommandKind::Start {
             self.current_session = Some(session.clone());
         }
-        tracing::info!(client = id, ?kind, session = %session, command_id = command.command_id, "command sent");
+        out.push(log(
+            Level::INFO,
+            format!(
+                "page {id}: command {} ({kind:?}) sent for session {session:?}",
+                command.command_id
+            ),
+        ));
         let sent = ServerMessage::CommandSent {
             command: kind,
             session_id: session,
@@ -170,7 +177,7 @@ impl Bridge {
                     return Err(format!(
                         "session {} is still running ({}): stop it first",
                         g.session_id,
-                        phase_name(g.phase)
+                        GameState::phase_name(g.phase)
                     ));
                 }
                 let base = format!("tablet-{}", now.wall_nanos / 1_000_000);

@@ -7,11 +7,12 @@
 //! a bridge that never hears one (a replay) shows nothing. Two game managers beating (one
 //! started twice) stay on the therapist page's status until one of them stops.
 
-use crate::bridge::{Bridge, Now, Output};
+use crate::bridge::{Bridge, Now, Output, log};
 use crate::protocol::{GameView, Role, ServerMessage};
 use heartbeat_watch::{Heard, HeartbeatWatch, Twins};
 use qt_therapy_msgs::{GameState, Heartbeat};
 use std::time::Duration;
+use tracing::Level;
 
 /// The game manager's node name, as its heartbeats carry it.
 pub const GAME_MANAGER_NODE: &str = "game_manager";
@@ -70,7 +71,7 @@ impl Bridge {
             seconds(lost.silent_ns),
             lost.last_pid.unwrap_or(0)
         );
-        tracing::warn!("{notice}");
+        out.push(log(Level::WARN, notice.clone()));
         w.notice = Some(notice);
         w.twins = w.heartbeats.twins(nanos(now.monotonic));
         self.show_game(&mut out);
@@ -90,19 +91,25 @@ impl Bridge {
                     hb.pid,
                     seconds(silent_ns)
                 );
-                tracing::info!("{back}");
+                out.push(log(Level::INFO, back.clone()));
                 w.notice = Some(back);
                 self.show_game(out);
             }
-            Heard::Restarted { old_pid } => tracing::warn!(
-                "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
-                hb.pid
-            ),
-            Heard::Twice { other_pid } => tracing::warn!(
-                "two game managers beat (pids {other_pid} and {}): one was started twice; \
-                 stop one",
-                hb.pid
-            ),
+            Heard::Restarted { old_pid } => out.push(log(
+                Level::WARN,
+                format!(
+                    "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
+                    hb.pid
+                ),
+            )),
+            Heard::Twice { other_pid } => out.push(log(
+                Level::WARN,
+                format!(
+                    "two game managers beat (pids {other_pid} and {}): one was started twice; \
+                     stop one",
+                    hb.pid
+                ),
+            )),
         }
         let w = &mut self.gm_watch;
         let twins = w.heartbeats.twins(nanos(now.monotonic));
@@ -145,7 +152,7 @@ impl Bridge {
     pub(crate) fn child_view(&self) -> Option<GameView> {
         let mut view = GameView::for_child(self.game.as_ref()?);
         if self.gm_watch.lost() {
-            view.phase = crate::protocol::phase_name(GameState::PAUSED);
+            view.phase = GameState::phase_name(GameState::PAUSED);
         }
         Some(view)
     }

@@ -365,7 +365,7 @@ async fn inner() {
     let log = logs.read("launch.err");
     for reason in [
         "wrong PIN",
-        "is not one of happy",
+        "is not happy, disgusted, sad or angry",
         "too many messages",
         "cross-origin",
     ] {
@@ -583,8 +583,8 @@ async fn refuse_bad_input(
         .collect();
     let expected = [
         format!("this answer is for sequence {old}, but the current task is sequence {now}"),
-        r#"answer[1] = "joy" is not one of happy, disgusted, sad, angry"#.into(),
-        format!("the answer has 1 emotions, the task asks for {n}"),
+        r#"answer[1] = "joy" is not happy, disgusted, sad or angry"#.into(),
+        format!("answer has 1 emotions, the task asked for {n}"),
         "not a valid message".into(),
         "message of 5000 bytes is over the limit of 4096 bytes".into(),
         "the child page cannot send commands".into(),

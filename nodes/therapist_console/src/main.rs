@@ -187,13 +187,14 @@ async fn main() -> anyhow::Result<()> {
 const CONFIRM_WAIT: Duration = Duration::from_secs(2);
 const SENDS: u32 = 3;
 
-/// Sends one command once a reader listens, then waits until the game manager confirms it: a
-/// GameState naming it (`command <id>` in its status; for START, the new session's first
-/// state). Confirmation is needed because a reliable sample still misses a reader that matched
-/// after it was sent (the recorder may match first), or when this process exits before it was
-/// delivered: an override was once lost that way. An unconfirmed command is sent again with
-/// the same id, which the game manager never carries out twice. Returns the exit code: 0
-/// carried out, 4 refused (the reason is printed).
+/// Sends one command once a reader listens, then waits until the game manager answers it: a
+/// GameState whose `command_session_id` and `command_id` name it, with what became of it
+/// (`command_outcome`). The answer is needed because a reliable sample still misses a reader
+/// that matched after it was sent (the recorder may match first), or when this process exits
+/// before it was delivered: an override was once lost that way. An unanswered command is sent
+/// again with the same id, which the game manager never carries out twice (it answers a repeat
+/// of one it carried out as such). Returns the exit code: 0 carried out, 4 refused (the reason
+/// is printed).
 async fn send(
     commands: &Outbox<TherapistCommand>,
     shell: &NodeShell,
@@ -211,29 +212,47 @@ async fn send(
         commands.send(c.clone());
         let until = tokio::time::Instant::now() + CONFIRM_WAIT;
         while let Ok(Some(s)) = tokio::time::timeout_at(until, states.recv()).await {
-            let started = c.command == TherapistCommand::START
-                && s.session_id == c.session_id
-                && s.phase != GameState::IDLE;
-            if !started && !s.status.contains(&tag) {
-                continue;
+            match answer_to(&c, &s) {
+                None => continue,
+                Some(Answer::CarriedOut) => return Ok(0),
+                Some(Answer::Refused(reason)) => {
+                    println!("{tag} refused: {reason}");
+                    return Ok(4);
+                }
             }
-            // A repeat of a command carried out before is refused as a duplicate: done.
-            if s.status.starts_with("rejected") && !s.status.contains("duplicate command id") {
-                println!("{}", s.status);
-                return Ok(4);
-            }
-            return Ok(0);
         }
         if attempt < SENDS {
             tracing::warn!(
-                "{tag} not confirmed by the game manager within {CONFIRM_WAIT:?}: sending it again"
+                "{tag} not answered by the game manager within {CONFIRM_WAIT:?}: sending it again"
             );
         }
     }
     bail!(
-        "the game manager did not confirm {tag} (session {:?}) after {SENDS} sends",
+        "the game manager did not answer {tag} (session {:?}) after {SENDS} sends",
         c.session_id
     )
+}
+
+/// What the game manager did with a command.
+#[derive(Debug, PartialEq)]
+enum Answer {
+    CarriedOut,
+    Refused(String),
+}
+
+/// The answer to `c` that `s` carries, if it carries one: its typed fields, never its status
+/// text. A repeat of a command carried out before is refused as such: it was carried out.
+fn answer_to(c: &TherapistCommand, s: &GameState) -> Option<Answer> {
+    if s.command_session_id != c.session_id || s.command_id != c.command_id {
+        return None;
+    }
+    match s.command_outcome {
+        GameState::COMMAND_CARRIED_OUT | GameState::COMMAND_ALREADY_CARRIED_OUT => {
+            Some(Answer::CarriedOut)
+        }
+        GameState::COMMAND_REFUSED => Some(Answer::Refused(s.command_refusal.clone())),
+        _ => None,
+    }
 }
 
 /// The START command, once the game manager is free. `states` None: it is known to be (the
@@ -317,7 +336,7 @@ async fn follow(
             Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
             Some(r) = results.recv() => if r.session_id == session {
                 let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                println!("{}", sequence_line(&r, None, &reason_from_messages(&r, d)));
+                println!("{}", sequence_line(&r, &reason_from_messages(&r, d)));
                 results_seen += 1;
             },
             Some(s) = states.recv() => {
@@ -333,7 +352,7 @@ async fn follow(
                             match tokio::time::timeout_at(grace, results.recv()).await {
                                 Ok(Some(r)) if r.session_id == session => {
                                     let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                                    println!("{}", sequence_line(&r, None, &reason_from_messages(&r, d)));
+                                    println!("{}", sequence_line(&r, &reason_from_messages(&r, d)));
                                     results_seen += 1;
                                 }
                                 Ok(Some(_)) => {}
@@ -354,20 +373,93 @@ async fn follow(
     }
 }
 
-fn phase_name(phase: u8) -> &'static str {
-    const NAMES: [&str; 9] = [
-        "idle",
-        "deciding",
-        "giving feedback",
-        "saying sequence",
-        "waiting for answer",
-        "paused",
-        "finished",
-        "stopped",
-        "emergency stopped",
-    ];
-    NAMES
-        .get(usize::from(phase))
-        .copied()
-        .unwrap_or("unknown phase")
+/// The phase in words (`saying sequence`).
+fn phase_name(phase: u8) -> String {
+    GameState::phase_name(phase).replace('_', " ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pause(id: u64) -> TherapistCommand {
+        TherapistCommand {
+            command: TherapistCommand::PAUSE,
+            session_id: "s1".into(),
+            command_id: id,
+            ..Default::default()
+        }
+    }
+
+    fn state(session: &str, id: u64, outcome: u8, refusal: &str, status: &str) -> GameState {
+        GameState {
+            command_session_id: session.into(),
+            command_id: id,
+            command_outcome: outcome,
+            command_refusal: refusal.into(),
+            status: status.into(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_answer_is_read_from_the_typed_fields_whatever_the_status_says() {
+        let c = pause(7);
+        // Statuses that name the command, or say "rejected", decide nothing.
+        for status in [
+            "",
+            "rejected command 7 (pause)",
+            "paused (command 7)",
+            "session started",
+        ] {
+            assert_eq!(
+                answer_to(
+                    &c,
+                    &state("s1", 7, GameState::COMMAND_CARRIED_OUT, "", status)
+                ),
+                Some(Answer::CarriedOut)
+            );
+            assert_eq!(
+                answer_to(
+                    &c,
+                    &state(
+                        "s1",
+                        7,
+                        GameState::COMMAND_REFUSED,
+                        "already paused",
+                        status
+                    )
+                ),
+                Some(Answer::Refused("already paused".into()))
+            );
+            assert_eq!(
+                answer_to(
+                    &c,
+                    &state("s1", 6, GameState::COMMAND_CARRIED_OUT, "", status)
+                ),
+                None,
+                "another command's answer"
+            );
+            assert_eq!(
+                answer_to(
+                    &c,
+                    &state("s2", 7, GameState::COMMAND_CARRIED_OUT, "", status)
+                ),
+                None,
+                "the same id in another session"
+            );
+        }
+        assert_eq!(
+            answer_to(
+                &c,
+                &state("s1", 7, GameState::COMMAND_ALREADY_CARRIED_OUT, "x", "")
+            ),
+            Some(Answer::CarriedOut),
+            "a repeat of a command carried out is done"
+        );
+        assert_eq!(
+            answer_to(&c, &state("s1", 7, GameState::COMMAND_NONE, "", "")),
+            None
+        );
+    }
 }

@@ -60,6 +60,26 @@ struct ExecutableAction {
     on_exit: Option<String>,
 }
 
+/// Where a process's output lines go (`output:` of an executable, as in ROS 2 launch).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OutputTo {
+    /// The launcher's terminal, prefixed by the process's name.
+    #[default]
+    Screen,
+    /// The process's log file, `<log dir>/<name>.log`.
+    Log,
+    Both,
+}
+
+impl OutputTo {
+    pub fn to_screen(self) -> bool {
+        self != OutputTo::Log
+    }
+    pub fn to_log(self) -> bool {
+        self != OutputTo::Screen
+    }
+}
+
 /// One process to run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProcessSpec {
@@ -71,6 +91,7 @@ pub struct ProcessSpec {
     pub respawn: bool,
     pub respawn_delay_secs: f64,
     pub shutdown_on_exit: bool,
+    pub output: OutputTo,
 }
 
 /// Parses `text` (from `path`, used in errors and to resolve relative `cwd`) with the launch
@@ -141,13 +162,16 @@ pub fn parse_launch(
                 if processes.iter().any(|p: &ProcessSpec| p.name == name) {
                     return Err(invalid(format!("two executables are named {name:?}")));
                 }
-                if let Some(o) = &x.output
-                    && !["screen", "log", "both"].contains(&o.as_str())
-                {
-                    return Err(invalid(format!(
-                        "{name}: output {o:?} is not screen, log or both"
-                    )));
-                }
+                let output = match x.output.as_deref() {
+                    None | Some("screen") => OutputTo::Screen,
+                    Some("log") => OutputTo::Log,
+                    Some("both") => OutputTo::Both,
+                    Some(o) => {
+                        return Err(invalid(format!(
+                            "{name}: output {o:?} is not screen, log or both"
+                        )));
+                    }
+                };
                 let expand = |v: &Option<String>| -> Result<Option<String>, LaunchError> {
                     v.as_deref()
                         .map(|t| substitute(t, &vars).map_err(invalid))
@@ -208,6 +232,7 @@ pub fn parse_launch(
                     respawn,
                     respawn_delay_secs,
                     shutdown_on_exit,
+                    output,
                 });
             }
         }

@@ -23,6 +23,23 @@ struct Cli {
     /// Print the processes that would start, and exit.
     #[arg(long)]
     print: bool,
+    /// Where the processes with `output: log` (or `both`) write `<name>.log`; default
+    /// `$ROS_LOG_DIR`, else `$ROS_HOME/log`, else `~/.ros/log`, as ROS 2 does.
+    #[arg(long)]
+    log_dir: Option<PathBuf>,
+}
+
+/// ROS 2's log directory: `$ROS_LOG_DIR`, `$ROS_HOME/log`, or `~/.ros/log`.
+fn default_log_dir() -> PathBuf {
+    let var = |name| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("ROS_LOG_DIR")
+        .or_else(|| var("ROS_HOME").map(|h| h.join("log")))
+        .or_else(|| var("HOME").map(|h| h.join(".ros/log")))
+        .unwrap_or_else(|| PathBuf::from(".ros/log"))
 }
 
 #[tokio::main]
@@ -47,6 +64,7 @@ async fn main() -> anyhow::Result<()> {
     if !(cli.grace.is_finite() && cli.grace >= 0.0) {
         anyhow::bail!("--grace {} is not a number of seconds", cli.grace);
     }
-    let code = supervisor::run(specs, Duration::from_secs_f64(cli.grace)).await?;
+    let log_dir = cli.log_dir.unwrap_or_else(default_log_dir);
+    let code = supervisor::run(specs, Duration::from_secs_f64(cli.grace), &log_dir).await?;
     std::process::exit(code);
 }

@@ -1,12 +1,16 @@
 //! Runs the processes of a launch description: starts each with its output prefixed by its
-//! name, reports a process that dies, respawns those marked `respawn`, and stops everything
-//! (SIGINT, then SIGKILL after a grace period) on Ctrl-C, SIGTERM or an `on_exit: shutdown`.
+//! name on the terminal, or in its log file (`output: log`), reports a process that dies,
+//! respawns those marked `respawn`, and stops everything (SIGINT, then SIGKILL after a grace
+//! period) on Ctrl-C, SIGTERM or an `on_exit: shutdown`.
 
-use crate::description::ProcessSpec;
+use launcher::description::ProcessSpec;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use std::collections::HashMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::io::{AsyncBufReadExt, BufReader};
 use tokio::process::{Child, Command};
@@ -29,7 +33,62 @@ fn say(text: &str) {
     eprintln!("[launch] {text}");
 }
 
-fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::Result<u32> {
+/// Where one process's lines go: the terminal (stdout lines to stdout, stderr lines to stderr),
+/// its log file, or both.
+#[derive(Clone)]
+struct Sink {
+    name: String,
+    screen: bool,
+    log: Option<Arc<Mutex<std::fs::File>>>,
+}
+
+impl Sink {
+    fn open(spec: &ProcessSpec, log_dir: &Path) -> std::io::Result<Sink> {
+        let log = if spec.output.to_log() {
+            std::fs::create_dir_all(log_dir)?;
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(log_path(log_dir, &spec.name))?;
+            Some(Arc::new(Mutex::new(file)))
+        } else {
+            None
+        };
+        Ok(Sink {
+            name: spec.name.clone(),
+            screen: spec.output.to_screen(),
+            log,
+        })
+    }
+
+    fn line(&self, line: &str, from_stderr: bool) {
+        if self.screen {
+            if from_stderr {
+                eprintln!("[{}] {line}", self.name);
+            } else {
+                println!("[{}] {line}", self.name);
+            }
+        }
+        if let Some(file) = &self.log
+            && let Ok(mut f) = file.lock()
+        {
+            // A full disk must not stop the node: the line is lost, the node goes on.
+            let _ = writeln!(f, "{line}");
+        }
+    }
+}
+
+/// The log file of the process `name`.
+pub fn log_path(log_dir: &Path, name: &str) -> PathBuf {
+    log_dir.join(format!("{name}.log"))
+}
+
+fn start(
+    spec: &ProcessSpec,
+    log_dir: &Path,
+    events: mpsc::UnboundedSender<Event>,
+) -> std::io::Result<u32> {
+    let sink = Sink::open(spec, log_dir)?;
     let mut cmd = Command::new(&spec.program);
     cmd.args(&spec.args)
         .envs(spec.env.iter().cloned())
@@ -47,14 +106,10 @@ fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::R
     let name = spec.name.clone();
     let mut forwarders = Vec::new();
     if let Some(out) = child.stdout.take() {
-        forwarders.push(forward_lines(out, name.clone(), |name, line| {
-            println!("[{name}] {line}")
-        }));
+        forwarders.push(forward_lines(out, sink.clone(), false));
     }
     if let Some(err) = child.stderr.take() {
-        forwarders.push(forward_lines(err, name.clone(), |name, line| {
-            eprintln!("[{name}] {line}")
-        }));
+        forwarders.push(forward_lines(err, sink, true));
     }
     tokio::spawn(async move {
         let status = child.wait().await;
@@ -77,15 +132,15 @@ fn start(spec: &ProcessSpec, events: mpsc::UnboundedSender<Event>) -> std::io::R
     Ok(pid)
 }
 
-/// Prints each line of a node's output pipe, prefixed by its name, until the pipe closes.
-fn forward_lines<R>(pipe: R, name: String, print: fn(&str, &str)) -> tokio::task::JoinHandle<()>
+/// Passes each line of a node's output pipe to its sink until the pipe closes.
+fn forward_lines<R>(pipe: R, sink: Sink, from_stderr: bool) -> tokio::task::JoinHandle<()>
 where
     R: tokio::io::AsyncRead + Unpin + Send + 'static,
 {
     tokio::spawn(async move {
         let mut lines = BufReader::new(pipe).lines();
         while let Ok(Some(line)) = lines.next_line().await {
-            print(&name, &line);
+            sink.line(&line, from_stderr);
         }
     })
 }
@@ -103,8 +158,21 @@ fn describe(code: Option<i32>, signal: Option<i32>) -> String {
     }
 }
 
-/// Runs `specs` to the end; returns the launcher's exit code.
-pub async fn run(specs: Vec<ProcessSpec>, grace: Duration) -> anyhow::Result<i32> {
+/// Runs `specs` to the end, the logs of those with `output: log` or `both` in `log_dir`;
+/// returns the launcher's exit code.
+pub async fn run(specs: Vec<ProcessSpec>, grace: Duration, log_dir: &Path) -> anyhow::Result<i32> {
+    let logged: Vec<&str> = specs
+        .iter()
+        .filter(|s| s.output.to_log())
+        .map(|s| s.name.as_str())
+        .collect();
+    if !logged.is_empty() {
+        say(&format!(
+            "output of {} in {}/<name>.log",
+            logged.join(", "),
+            log_dir.display()
+        ));
+    }
     let (tx, mut rx) = mpsc::unbounded_channel();
     let by_name: HashMap<String, ProcessSpec> =
         specs.iter().map(|s| (s.name.clone(), s.clone())).collect();
@@ -118,7 +186,7 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration) -> anyhow::Result<i32
     let mut interrupt = signal(SignalKind::interrupt())?;
     let mut terminate = signal(SignalKind::terminate())?;
     for spec in &specs {
-        match start(spec, tx.clone()) {
+        match start(spec, log_dir, tx.clone()) {
             Ok(pid) => {
                 say(&format!(
                     "started {} (pid {pid}): {} {}",
@@ -194,7 +262,7 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration) -> anyhow::Result<i32
                 let Some(spec) = by_name.get(&name) else {
                     continue;
                 };
-                match start(spec, tx.clone()) {
+                match start(spec, log_dir, tx.clone()) {
                     Ok(pid) => {
                         say(&format!("restarted {name} (pid {pid})"));
                         running.insert(name, pid);

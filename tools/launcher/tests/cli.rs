@@ -13,6 +13,8 @@ fn launch(dir: &Path, file_text: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_launch"))
         .arg(&file)
         .args(["--grace", "2"])
+        .arg("--log-dir")
+        .arg(dir.join("logs"))
         .current_dir(dir)
         // Keep anyhow's error report to the message a user sees.
         .env_remove("RUST_BACKTRACE")
@@ -50,6 +52,37 @@ fn output_is_prefixed_per_node_and_a_dying_node_sets_the_exit_code() {
     let died = stderr.find("[launch] first died (exit code 3)");
     assert!(oops.is_some() && died.is_some() && oops < died, "{context}");
     assert!(stderr.contains("[launch] second finished"), "{context}");
+}
+
+#[test]
+fn output_log_goes_to_the_node_log_file_only_and_both_to_both() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = launch(
+        dir.path(),
+        "launch:\n\
+         - executable:\n    cmd: sh -c 'echo quiet out; echo quiet err >&2'\n    name: quiet\n    output: log\n\
+         - executable:\n    cmd: sh -c 'echo loud'\n    name: loud\n    output: both\n\
+         - executable:\n    cmd: sh -c 'echo plain'\n    name: plain\n",
+    );
+    let (stdout, stderr) = text(&out);
+    let context = format!("stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{context}");
+    assert!(
+        !stdout.contains("quiet") && !stderr.contains("[quiet] quiet"),
+        "{context}"
+    );
+    assert!(stdout.lines().any(|l| l == "[loud] loud"), "{context}");
+    assert!(stdout.lines().any(|l| l == "[plain] plain"), "{context}");
+    let logs = dir.path().join("logs");
+    let read = |name: &str| std::fs::read_to_string(logs.join(format!("{name}.log")));
+    let quiet = read("quiet").expect("quiet.log");
+    assert!(
+        quiet.contains("quiet out\n") && quiet.contains("quiet err\n"),
+        "{quiet}"
+    );
+    assert_eq!(read("loud").expect("loud.log"), "loud\n");
+    assert!(read("plain").is_err(), "a screen-only node has no log file");
+    assert!(stderr.contains("output of quiet, loud in"), "{context}");
 }
 
 #[test]

@@ -6,7 +6,7 @@
 
 use figures::engagement::{EngagementPlot, engagement_svg};
 use plotters::prelude::*;
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult};
+use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, Tally};
 use std::fmt::Write as _;
 
 /// Why a report could not be made.
@@ -36,14 +36,8 @@ pub struct Summary {
     pub session_id: String,
     pub user_id: String,
     pub cluster: i32,
-    pub sequences: usize,
-    pub correct: usize,
-    /// Sum of L * O: the paper's accumulated score.
-    pub score: i32,
-    /// Sum of L: the best score possible with these levels.
-    pub max_score: i32,
-    pub mean_engagement: Option<f64>,
-    pub timeouts: usize,
+    /// Sequences, right answers, timeouts, score L·O out of the best possible, engagement.
+    pub tally: Tally,
     pub overrides: usize,
     pub policy_fallbacks: usize,
     pub explored: usize,
@@ -99,30 +93,11 @@ impl SessionLog {
 
     pub fn summary(&self) -> Result<Summary, ReportError> {
         let first = self.results.first().ok_or(ReportError::Empty)?;
-        let score = self
-            .results
-            .iter()
-            .map(|r| i32::from(r.level) * i32::from(r.outcome))
-            .sum();
-        let max_score = self.results.iter().map(|r| i32::from(r.level)).sum();
-        let with_engagement: Vec<f64> = self
-            .results
-            .iter()
-            .filter(|r| !r.engagement_per_second.is_empty())
-            .map(|r| f64::from(r.engagement))
-            .collect();
-        let mean_engagement = (!with_engagement.is_empty())
-            .then(|| with_engagement.iter().sum::<f64>() / with_engagement.len() as f64);
         Ok(Summary {
             session_id: first.session_id.clone(),
             user_id: first.user_id.clone(),
             cluster: first.user_model_cluster,
-            sequences: self.results.len(),
-            correct: self.results.iter().filter(|r| r.outcome == 1).count(),
-            score,
-            max_score,
-            mean_engagement,
-            timeouts: self.results.iter().filter(|r| r.timed_out).count(),
+            tally: Tally::of(&self.results),
             overrides: self.results.iter().filter(|r| r.overridden).count(),
             policy_fallbacks: self
                 .states
@@ -187,8 +162,8 @@ pub fn levels_svg(log: &SessionLog) -> Result<String, ReportError> {
             });
         let scores = log.results.iter().map(|r| {
             let x = f64::from(r.sequence_index);
-            let s = f64::from(r.level) * f64::from(r.outcome);
-            let colour = if r.outcome == 1 {
+            let s = f64::from(r.score());
+            let colour = if r.is_right() {
                 RGBColor(30, 140, 60)
             } else {
                 RGBColor(200, 40, 40)
@@ -335,8 +310,6 @@ fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-const ACTIONS: [&str; 5] = ["L1", "L2", "L3", "encourage", "challenge"];
-
 /// The whole report as one HTML page (figures inline, no external resources).
 pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
     let s = log.summary()?;
@@ -355,6 +328,7 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
          <h1>{title}</h1>"
     );
     let engagement = s
+        .tally
         .mean_engagement
         .map(|e| format!("{e:+.2}"))
         .unwrap_or_else(|| "no face seen".into());
@@ -364,16 +338,12 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
          (ratio {:.2}). Mean expected engagement <b>{engagement}</b>. Timeouts {}, therapist \
          overrides {}, policy fallbacks {}, exploratory decisions {}.</p>",
         s.cluster,
-        s.sequences,
-        s.correct,
-        s.score,
-        s.max_score,
-        if s.max_score > 0 {
-            f64::from(s.score) / f64::from(s.max_score)
-        } else {
-            0.0
-        },
-        s.timeouts,
+        s.tally.sequences,
+        s.tally.correct,
+        s.tally.score,
+        s.tally.max_score,
+        s.tally.ratio(),
+        s.tally.timeouts,
         s.overrides,
         s.policy_fallbacks,
         s.explored
@@ -411,7 +381,8 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
             .decisions
             .iter()
             .find(|d| d.session_id == r.session_id && d.step == r.sequence_index);
-        let action = ACTIONS.get(usize::from(r.action)).copied().unwrap_or("?");
+        let action = sequence_game::Action::new(r.action.into())
+            .map_or_else(|_| "?".into(), sequence_game::Action::label);
         let (how, t, qs, row_class) = match d {
             _ if r.overridden => (
                 "therapist override".to_string(),
@@ -509,10 +480,15 @@ mod tests {
         };
         let s = log.summary().expect("summary");
         assert_eq!(
-            (s.score, s.max_score, s.correct, s.sequences),
+            (
+                s.tally.score,
+                s.tally.max_score,
+                s.tally.correct,
+                s.tally.sequences
+            ),
             (1 - 3 + 2, 6, 2, 3)
         );
-        assert_eq!(s.mean_engagement, Some(0.5));
+        assert_eq!(s.tally.mean_engagement, Some(0.5));
         assert!(matches!(
             SessionLog::default().summary(),
             Err(ReportError::Empty)

@@ -39,9 +39,9 @@ fn main() -> anyhow::Result<()> {
     println!(
         "session {}: {} sequences, score {} of {}, report {}",
         s.session_id,
-        s.sequences,
-        s.score,
-        s.max_score,
+        s.tally.sequences,
+        s.tally.score,
+        s.tally.max_score,
         output.display()
     );
     Ok(())

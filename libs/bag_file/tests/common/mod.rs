@@ -176,6 +176,11 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
         last_score: 0,
         policy_fallback: false,
         status: status.into(),
+        sequences_planned: 10,
+        command_session_id: session_id.clone(),
+        command_id: 1,
+        command_outcome: GameState::COMMAND_CARRIED_OUT,
+        command_refusal: String::new(),
     };
     s.put(
         GAME_STATE,
@@ -277,7 +282,10 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
             activity_result: 1.0,
             engagement: 0.71,
             engagement_per_second: vec![0.7, 0.71, 0.72],
+            engagement_period_start: Time::from_nanos((START_NS + 15 * MS) as i64),
+            engagement_period_end: Time::from_nanos((START_NS + 1200 * MS) as i64),
             response_time: 1.19,
+            sequences_planned: 10,
         },
     );
     s.put(

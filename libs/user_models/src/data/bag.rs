@@ -1,14 +1,16 @@
 //! Interaction records from our MCAP session bags (`bag record`), so user models can be fitted
 //! straight from recorded sessions: one record per `SequenceResult`, with the per-second
 //! engagement recomputed from the `ExpectedEngagement` windows of the period the robot talked
-//! for that sequence, the game manager's own period and rule (`nodes/game_manager/src/
-//! scoring.rs`): from the end of the previous sequence of the session (its answer or timeout;
-//! the session's start for the first) to the moment the task was sent to the tablet; a window
+//! for that sequence, the game manager's own period and rule (`msgs/src/sequence_engagement.rs`):
+//! from the end of the previous sequence of the session (its answer or timeout; the session's
+//! start for the first) to the moment the task was sent to the tablet; a window
 //! counts when its midpoint lies in that period and it saw a face; each second is the mean of
-//! its sources' smoothed values. The period's ends come from the bag: the session's start is its
-//! first `GameState` stamp, the task's sending its `TabletTask` stamp, and the answer that task's
-//! stamp plus the result's response time. A damaged bag yields the sequences before the damage
-//! and a warning naming the bad record.
+//! its sources' smoothed values. The period is the result's own (`engagement_period_start`,
+//! `_end`, as the game manager timed it); for results recorded before it carried one, it is
+//! inferred from the bag: the session's start is its first `GameState` stamp, the task's
+//! sending its `TabletTask` stamp, and the answer that task's stamp plus the result's response
+//! time (a few milliseconds off the game manager's, so a window at the edge may differ). A
+//! damaged bag yields the sequences before the damage and a warning naming the bad record.
 
 use super::{DataError, FieldError, InteractionRecord};
 use bag_file::{BagError, BagReader, Stamped};
@@ -219,40 +221,12 @@ pub fn records_from(
             let level = Level::new(r.level.into()).map_err(game("level"))?;
             let feedback = Feedback::new(r.feedback.into()).map_err(game("feedback"))?;
             let outcome = Outcome::new(r.outcome.into()).map_err(game("outcome"))?;
-            let result_ns = stamp_ns(&r.header.stamp);
-            let task = m
-                .tasks
-                .iter()
-                .filter(|t| {
-                    t.message.session_id == r.session_id
-                        && t.message.sequence_index == r.sequence_index
-                        && stamp_ns(&t.message.header.stamp) <= result_ns
-                })
-                .map(|t| stamp_ns(&t.message.header.stamp))
-                .max()
-                .ok_or_else(|| {
-                    FieldError::new(
-                        "sequence_index",
-                        format!(
-                            "no TabletTask of session {:?} sequence {} on {} before it, so when the robot stopped talking is unknown",
-                            r.session_id, r.sequence_index, TABLET_TASK.name
-                        ),
-                    )
-                })?;
-            let talk_start = match last_answer.get(r.session_id.as_str()) {
-                Some(t) => *t,
-                None => *session_start.get(r.session_id.as_str()).ok_or_else(|| {
-                    FieldError::new(
-                        "session_id",
-                        format!(
-                            "no GameState of session {:?} on {}, so when it started is unknown",
-                            r.session_id, GAME_STATE.name
-                        ),
-                    )
-                })?,
-            };
             let response_time = f64::from(r.response_time);
             let rt_ok = super::in_range("response_time", response_time, 0.0, 86_400.0)?;
+            let (talk_start, task) = match explicit_period(r)? {
+                Some(period) => period,
+                None => inferred_period(m, r, &session_start, &last_answer)?,
+            };
             let answered = task + (rt_ok * 1e9).round() as i64;
             let per_second = engagement_per_second(&m.engagement, talk_start, task);
             let engagement = (!per_second.is_empty())
@@ -278,6 +252,69 @@ pub fn records_from(
         out.push(record);
     }
     Ok(out)
+}
+
+/// The period a result says its engagement was gathered over (results recorded since the
+/// game manager wrote it); None for a result without one.
+fn explicit_period(r: &SequenceResult) -> Result<Option<(i64, i64)>, FieldError> {
+    let (start, end) = (
+        r.engagement_period_start.to_nanos(),
+        r.engagement_period_end.to_nanos(),
+    );
+    if end == 0 {
+        return Ok(None);
+    }
+    if start > end {
+        return Err(FieldError::new(
+            "engagement_period_start",
+            format!("{start} ns is after engagement_period_end {end} ns"),
+        ));
+    }
+    Ok(Some((start, end)))
+}
+
+/// The period of a result recorded without one, from the bag as the game manager timed it:
+/// from the previous answer of the session (its task's stamp plus its response time; the
+/// session's first GameState for sequence 1) to this sequence's TabletTask stamp.
+fn inferred_period(
+    m: &SessionMessages,
+    r: &SequenceResult,
+    session_start: &HashMap<&str, i64>,
+    last_answer: &HashMap<&str, i64>,
+) -> Result<(i64, i64), FieldError> {
+    let result_ns = stamp_ns(&r.header.stamp);
+    let task = m
+        .tasks
+        .iter()
+        .filter(|t| {
+            t.message.session_id == r.session_id
+                && t.message.sequence_index == r.sequence_index
+                && stamp_ns(&t.message.header.stamp) <= result_ns
+        })
+        .map(|t| stamp_ns(&t.message.header.stamp))
+        .max()
+        .ok_or_else(|| {
+            FieldError::new(
+                "sequence_index",
+                format!(
+                    "no TabletTask of session {:?} sequence {} on {} before it, so when the robot stopped talking is unknown",
+                    r.session_id, r.sequence_index, TABLET_TASK.name
+                ),
+            )
+        })?;
+    let talk_start = match last_answer.get(r.session_id.as_str()) {
+        Some(t) => *t,
+        None => *session_start.get(r.session_id.as_str()).ok_or_else(|| {
+            FieldError::new(
+                "session_id",
+                format!(
+                    "no GameState of session {:?} on {}, so when it started is unknown",
+                    r.session_id, GAME_STATE.name
+                ),
+            )
+        })?,
+    };
+    Ok((talk_start, task))
 }
 
 #[cfg(test)]

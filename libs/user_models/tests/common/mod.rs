@@ -207,7 +207,10 @@ pub fn write_bag_with(path: &Path, records: &[InteractionRecord], options: &Writ
                         .iter()
                         .map(|v| *v as f32)
                         .collect(),
+                    engagement_period_start: Time::from_nanos(l.talk_start),
+                    engagement_period_end: Time::from_nanos(l.task),
                     response_time: r.response_time as f32,
+                    sequences_planned: laid.len() as u8,
                 },
             )
             .expect("writes");

@@ -65,16 +65,13 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
     .context("q_table_dir")?;
     let (mut shell, params): (NodeShell, BehaviourPolicyParams) =
         NodeShell::start(BEHAVIOUR_POLICY_NODE, &options)?;
-    let learning = params.learning()?;
-    let set =
-        user_models::UserModelSet::load(Path::new(&params.user_model_file)).with_context(|| {
-            format!(
-                "user_model_file in {}",
-                options.params_path(shell.name()).display()
-            )
-        })?;
+    let params_file = options.params_path(shell.name());
+    let in_file = || format!("parameter file {}", params_file.display());
+    let learning = params.learning().with_context(in_file)?;
+    let set = user_models::UserModelSet::load(Path::new(&params.user_model_file))
+        .with_context(|| format!("user_model_file in {}", params_file.display()))?;
     // Parameter errors stop the node; a bad Q-table file only makes its cluster unavailable.
-    let pretraining = params.pretraining()?;
+    let pretraining = params.pretraining().with_context(in_file)?;
     let models = set.tables();
     let mut policies = ClusterPolicies::open(
         Path::new(&params.q_table_dir),

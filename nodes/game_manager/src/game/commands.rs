@@ -4,11 +4,11 @@
 //! running session is honoured even with an out-of-order id: silencing the robot is never
 //! the unsafe choice.
 
-use super::{Current, GameManager, Phase, Session, Timer};
+use super::{CommandAnswer, Current, GameManager, Phase, Session, Timer};
 use crate::protocol::{LogLevel, Output};
 use crate::sequence::SessionRng;
 use crate::session_file::{JournalCommand, JournalEntry, SessionEnd};
-use qt_therapy_msgs::TherapistCommand;
+use qt_therapy_msgs::{GameState, TherapistCommand};
 use sequence_game::{Level, State};
 
 fn command_name(code: u8) -> &'static str {
@@ -31,13 +31,30 @@ impl GameManager {
             command_name(c.command),
             c.session_id
         );
-        if let Err(reason) = self.check_command(&c) {
+        if let Err(refusal) = self.check_command(&c) {
             if let Some(s) = self.session.as_mut() {
                 s.rejected_commands += 1;
             }
-            self.reject(format!("{what}: {reason}"), now);
+            let text = format!("{what}: {refusal}");
+            self.answered = CommandAnswer {
+                session_id: c.session_id.clone(),
+                command_id: c.command_id,
+                outcome: match refusal {
+                    Refusal::AlreadyCarriedOut(_) => GameState::COMMAND_ALREADY_CARRIED_OUT,
+                    Refusal::Refused(_) => GameState::COMMAND_REFUSED,
+                },
+                refusal: refusal.to_string(),
+            };
+            self.reject(text, now);
             return;
         }
+        // Carried out: the state that shows its effect says so.
+        self.answered = CommandAnswer {
+            session_id: c.session_id.clone(),
+            command_id: c.command_id,
+            outcome: GameState::COMMAND_CARRIED_OUT,
+            refusal: String::new(),
+        };
         if c.command == TherapistCommand::START {
             self.start_session(&c, now);
             return;
@@ -57,13 +74,13 @@ impl GameManager {
             );
             if let Some(last) = out_of_order {
                 self.log(
-                    LogLevel::Warn,
+                    LogLevel::WARN,
                     format!("{what}: out-of-order id (last {last}) honoured for an emergency stop"),
                 );
             }
             return;
         }
-        self.log(LogLevel::Info, format!("accepted {what}"));
+        self.log(LogLevel::INFO, format!("accepted {what}"));
         match c.command {
             TherapistCommand::PAUSE => {
                 self.journal_command(c.command_id, JournalCommand::Pause, None, now);
@@ -83,12 +100,12 @@ impl GameManager {
     }
 
     /// Why a command cannot be carried out now, if it cannot.
-    fn check_command(&self, c: &TherapistCommand) -> Result<(), String> {
+    fn check_command(&self, c: &TherapistCommand) -> Result<(), Refusal> {
         if c.command > TherapistCommand::EMERGENCY_STOP {
-            return Err(format!("unknown command code {}", c.command));
+            return refuse(format!("unknown command code {}", c.command));
         }
         if c.session_id.is_empty() {
-            return Err("session_id is empty".into());
+            return refuse("session_id is empty");
         }
         let running = self.session_running();
         let session = self.session.as_ref();
@@ -96,24 +113,24 @@ impl GameManager {
             if running && let Some(s) = session {
                 if s.id == c.session_id {
                     check_order(s, c)?;
-                    return Err("this session is already running".into());
+                    return refuse("this session is already running");
                 }
-                return Err(format!("busy with session {:?}: stop it first", s.id));
+                return refuse(format!("busy with session {:?}: stop it first", s.id));
             }
             let lost = self.lost_names();
             if !lost.is_empty() {
-                return Err(format!(
+                return refuse(format!(
                     "node lost: {lost}; a session can start when it is back"
                 ));
             }
             if self.used_sessions.contains(&c.session_id) {
-                return Err("this session id was already used; start a new session id".into());
+                return refuse("this session id was already used; start a new session id");
             }
             if c.user_id.is_empty() {
-                return Err("user_id is empty".into());
+                return refuse("user_id is empty");
             }
             if !(-1..=63).contains(&c.user_model_cluster) {
-                return Err(format!(
+                return refuse(format!(
                     "user_model_cluster {} is outside -1..=63",
                     c.user_model_cluster
                 ));
@@ -121,36 +138,36 @@ impl GameManager {
             return Ok(());
         }
         let Some(s) = session else {
-            return Err("no session is running".into());
+            return refuse("no session is running");
         };
         if s.id != c.session_id {
-            return Err(if running {
+            return refuse(if running {
                 format!("wrong session: session {:?} is running", s.id)
             } else {
                 "no session is running".into()
             });
         }
         if !running {
-            return Err(format!("session has already ended ({})", self.ended_name()));
+            return refuse(format!("session has already ended ({})", self.ended_name()));
         }
         if c.command != TherapistCommand::EMERGENCY_STOP {
             check_order(s, c)?;
         }
         match c.command {
-            TherapistCommand::PAUSE if s.paused_since.is_some() => Err("already paused".into()),
+            TherapistCommand::PAUSE if s.paused_since.is_some() => refuse("already paused"),
             TherapistCommand::RESUME if s.paused_since.is_none() && s.held_since.is_some() => {
-                Err(format!(
+                refuse(format!(
                     "held because a node is lost ({}): it can go on when the node is back",
                     self.lost_names()
                 ))
             }
-            TherapistCommand::RESUME if s.paused_since.is_none() => Err("not paused".into()),
+            TherapistCommand::RESUME if s.paused_since.is_none() => refuse("not paused"),
             TherapistCommand::OVERRIDE_LEVEL => {
                 if Level::new(c.level.into()).is_err() {
-                    return Err(format!("level {} is not 1, 2 or 3", c.level));
+                    return refuse(format!("level {} is not 1, 2 or 3", c.level));
                 }
                 if self.override_target() > self.sequences() {
-                    return Err("no sequence is left to override".into());
+                    return refuse("no sequence is left to override");
                 }
                 Ok(())
             }
@@ -238,16 +255,9 @@ impl GameManager {
             rejected_commands: 0,
             rejected_answers: 0,
         });
-        self.log(
-            LogLevel::Info,
-            format!(
-                "session {:?} started for user {:?} (cluster {}), command {}",
-                c.session_id, c.user_id, c.user_model_cluster, c.command_id
-            ),
-        );
         self.out.push(Output::LiveLine(format!(
-            "session {:?} started for user {:?} (cluster {})",
-            c.session_id, c.user_id, c.user_model_cluster
+            "session {:?} started for user {:?} (cluster {}), command {}",
+            c.session_id, c.user_id, c.user_model_cluster, c.command_id
         )));
         self.set_phase(
             Phase::Deciding,
@@ -303,7 +313,7 @@ impl GameManager {
             .and_then(|s| s.paused_since.take())
             .map_or(0, |since| now - since);
         self.log(
-            LogLevel::Info,
+            LogLevel::INFO,
             format!("resumed after {:.1} s", paused_for as f64 * 1e-9),
         );
         if self.paused() {
@@ -363,7 +373,7 @@ impl GameManager {
             s.pending_override = Some((target, level));
         }
         self.log(
-            LogLevel::Info,
+            LogLevel::INFO,
             format!("sequence {target} set to {level} by the therapist"),
         );
         // Every accepted command's first state names it: the console waits for that.
@@ -378,13 +388,35 @@ impl GameManager {
     }
 }
 
+/// Why a command was not carried out.
+#[derive(Debug, Clone, PartialEq)]
+enum Refusal {
+    /// Its id is the last one carried out in the session: a repeat (a console that did not
+    /// see the answer sends a command again with its id).
+    AlreadyCarriedOut(u64),
+    Refused(String),
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refusal::AlreadyCarriedOut(id) => write!(f, "duplicate command id {id}"),
+            Refusal::Refused(reason) => f.write_str(reason),
+        }
+    }
+}
+
+fn refuse<T>(reason: impl Into<String>) -> Result<T, Refusal> {
+    Err(Refusal::Refused(reason.into()))
+}
+
 /// Command ids must increase within a session.
-fn check_order(s: &Session, c: &TherapistCommand) -> Result<(), String> {
+fn check_order(s: &Session, c: &TherapistCommand) -> Result<(), Refusal> {
     if c.command_id == s.last_command_id {
-        return Err(format!("duplicate command id {}", c.command_id));
+        return Err(Refusal::AlreadyCarriedOut(c.command_id));
     }
     if c.command_id < s.last_command_id {
-        return Err(format!(
+        return refuse(format!(
             "stale command id {} (last accepted {})",
             c.command_id, s.last_command_id
         ));

@@ -80,7 +80,7 @@ impl GameManager {
     ) {
         if self.phase != Phase::Deciding || self.current.request_id != Some(request_id) {
             self.log(
-                LogLevel::Info,
+                LogLevel::INFO,
                 format!("ignored a late or superseded policy answer (request {request_id})"),
             );
             return;
@@ -167,7 +167,7 @@ impl GameManager {
             // waiting costs the child nothing: the policy is asked again when the session
             // goes on, rather than a fallback played.
             self.log(
-                LogLevel::Info,
+                LogLevel::INFO,
                 format!(
                     "the policy did not answer within {s} s while the session was paused or \
                      held; it is asked again when the session goes on"
@@ -184,7 +184,7 @@ impl GameManager {
         let index = self.session.as_ref().map_or(0, |s| s.index);
         let silent_s = silent_ns as f64 * 1e-9;
         self.log(
-            LogLevel::Warn,
+            LogLevel::WARN,
             format!(
                 "sequence {index}: the policy did not answer within {} s and has sent no \
                  heartbeat for {silent_s:.1} s: waiting for its next heartbeat (it is then \
@@ -214,7 +214,7 @@ impl GameManager {
     pub(super) fn ask_policy_again(&mut self, why: &str, now: i64) {
         if let Some(old) = self.current.request_id.take() {
             self.log(
-                LogLevel::Info,
+                LogLevel::INFO,
                 format!("{why}: asking the policy again (request {old} still unanswered)"),
             );
         }
@@ -230,7 +230,7 @@ impl GameManager {
         s.fallbacks += 1;
         let index = s.index;
         self.log(
-            LogLevel::Warn,
+            LogLevel::WARN,
             format!("sequence {index}: safe fallback ({level}, no feedback): {reason}"),
         );
         self.current.plan = Some(Plan {

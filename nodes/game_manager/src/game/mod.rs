@@ -156,7 +156,19 @@ pub struct GameManager {
     /// Watched names two processes beat under (a node started twice), as last shown.
     twins: Vec<Twins>,
     status: String,
+    /// The therapist command answered last, as every GameState tells it.
+    answered: CommandAnswer,
     out: Vec<Output>,
+}
+
+/// What became of a therapist command (GameState's `command_*` fields).
+#[derive(Debug, Clone, Default, PartialEq)]
+struct CommandAnswer {
+    session_id: String,
+    command_id: u64,
+    /// `GameState::COMMAND_*`
+    outcome: u8,
+    refusal: String,
 }
 
 impl GameManager {
@@ -181,6 +193,7 @@ impl GameManager {
             watchdog: None,
             twins: Vec::new(),
             status: "waiting for a therapist to start a session".into(),
+            answered: CommandAnswer::default(),
             out: Vec::new(),
         })
     }
@@ -286,7 +299,7 @@ impl GameManager {
 
     /// A rejected input: counted, logged, and shown in GameState.status.
     fn reject(&mut self, what: String, now: i64) {
-        self.log(LogLevel::Warn, format!("rejected {what}"));
+        self.log(LogLevel::WARN, format!("rejected {what}"));
         self.status = format!("rejected {what}");
         self.publish_state(now);
     }
@@ -316,12 +329,17 @@ impl GameManager {
         if !lost.is_empty() {
             status = format!("node lost: {lost}; {status}");
         }
+        let answered = &self.answered;
         let msg = match &self.session {
             None => GameState {
                 header: Header::at(Time::from_nanos(now)),
                 phase,
                 user_model_cluster: -1,
                 status: status.clone(),
+                command_session_id: answered.session_id.clone(),
+                command_id: answered.command_id,
+                command_outcome: answered.outcome,
+                command_refusal: answered.refusal.clone(),
                 ..Default::default()
             },
             Some(s) => GameState {
@@ -336,6 +354,11 @@ impl GameManager {
                 last_score: s.state.previous_score,
                 policy_fallback: plan.is_some_and(|p| p.fallback),
                 status: status.clone(),
+                sequences_planned: self.sequences(),
+                command_session_id: answered.session_id.clone(),
+                command_id: answered.command_id,
+                command_outcome: answered.outcome,
+                command_refusal: answered.refusal.clone(),
             },
         };
         self.out.push(Output::State(msg));

@@ -3,12 +3,12 @@
 //! its summary on finish, stop, emergency stop or shutdown.
 
 use super::{Current, GameManager, Phase, Timer};
-use crate::protocol::{LogLevel, Output};
+use crate::protocol::Output;
 use crate::session_file::{SequenceRecord, SessionEnd, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::live_line::sequence_line;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer};
+use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer, Tally};
 use sequence_game::{Emotion, State};
 use sequence_game::{parse_answer, score};
 
@@ -113,7 +113,10 @@ impl GameManager {
             activity_result: scored.activity_result as f32,
             engagement: engagement.mean,
             engagement_per_second: engagement.per_second,
+            engagement_period_start: Time::from_nanos(s.talk_start_ns),
+            engagement_period_end: Time::from_nanos(c.task_sent_ns),
             response_time: c.response_time,
+            sequences_planned: self.params.sequences_per_session as u8,
         };
         let record = SequenceRecord {
             result: result.clone(),
@@ -128,12 +131,11 @@ impl GameManager {
         s.talk_start_ns = c.answered_ns;
         s.results.push(result.clone());
         let last = s.index >= self.params.sequences_per_session as u8;
-        let line = sequence_line(&result, Some(self.sequences()), &plan.reason);
+        let line = sequence_line(&result, &plan.reason);
         self.engagement.forget_before(c.answered_ns);
         self.out.push(Output::Record(Box::new(record)));
         self.out.push(Output::Result(result));
-        self.out.push(Output::LiveLine(line.clone()));
-        self.log(LogLevel::Info, line);
+        self.out.push(Output::LiveLine(line));
         if !go_on {
             return;
         }
@@ -196,12 +198,7 @@ impl GameManager {
         };
         s.paused_since = None;
         s.held_since = None;
-        let with_e: Vec<f64> = s
-            .results
-            .iter()
-            .filter(|r| !r.engagement_per_second.is_empty())
-            .map(|r| f64::from(r.engagement))
-            .collect();
+        let tally = Tally::of(&s.results);
         let summary = SessionSummary {
             session_id: s.id.clone(),
             user_id: s.user_id.clone(),
@@ -211,16 +208,11 @@ impl GameManager {
             sequences_planned: self.params.sequences_per_session as u8,
             sequences_played: s.results.len() as u8,
             interrupted_sequence: interrupted.then_some(s.index),
-            correct: s.results.iter().filter(|r| r.outcome > 0).count() as u32,
-            timeouts: s.results.iter().filter(|r| r.timed_out).count() as u32,
-            score: s
-                .results
-                .iter()
-                .map(|r| i32::from(r.level) * i32::from(r.outcome))
-                .sum(),
-            max_score: s.results.iter().map(|r| i32::from(r.level)).sum(),
-            mean_engagement: (!with_e.is_empty())
-                .then(|| with_e.iter().sum::<f64>() / with_e.len() as f64),
+            correct: tally.correct as u32,
+            timeouts: tally.timeouts as u32,
+            score: tally.score,
+            max_score: tally.max_score,
+            mean_engagement: tally.mean_engagement,
             overrides: s.overrides,
             policy_fallbacks: s.fallbacks,
             rejected_commands: s.rejected_commands,
@@ -240,8 +232,7 @@ impl GameManager {
             summary.max_score
         );
         self.out.push(Output::Summary(Box::new(summary)));
-        self.out.push(Output::LiveLine(line.clone()));
-        self.log(LogLevel::Info, line);
+        self.out.push(Output::LiveLine(line));
         self.set_phase(Phase::Ended(end), reason.to_string(), now);
     }
 }

@@ -142,7 +142,7 @@ impl GameManager {
             Timer::AnswerTimeout => {
                 let index = self.session.as_ref().map_or(0, |s| s.index);
                 self.log(
-                    LogLevel::Warn,
+                    LogLevel::WARN,
                     format!(
                         "sequence {index}: no answer within {} s: counted as wrong",
                         self.params.answer_timeout_s * self.params.time_scale

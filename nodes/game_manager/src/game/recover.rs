@@ -28,7 +28,7 @@ impl GameManager {
         self.out.push(Output::Say(String::new()));
         for d in &r.damage {
             self.log(
-                LogLevel::Warn,
+                LogLevel::WARN,
                 format!("recovering {:?}: {d}", r.session_id),
             );
         }
@@ -113,7 +113,6 @@ impl GameManager {
              sequence {next} next{damaged})",
             r.session_id
         );
-        self.log(LogLevel::Warn, line.clone());
         self.out.push(Output::LiveLine(format!("!! {line}")));
         self.set_phase(
             Phase::Deciding,
@@ -133,7 +132,7 @@ impl GameManager {
             let res = &record.result;
             if usize::from(res.sequence_index) != k + 1 {
                 self.log(
-                    LogLevel::Warn,
+                    LogLevel::WARN,
                     format!(
                         "recovering {:?}: a sequence before {} is missing, so the sequences \
                          from here on are drawn afresh",
@@ -155,7 +154,7 @@ impl GameManager {
             let said: Vec<&str> = drawn.iter().map(|e: &Emotion| e.name()).collect();
             if said != res.sequence {
                 self.log(
-                    LogLevel::Warn,
+                    LogLevel::WARN,
                     format!(
                         "recovering {:?}: sequence {} in the file is not what seed {} draws \
                          (parameters changed?); the next sequences are drawn afresh",

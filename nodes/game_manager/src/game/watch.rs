@@ -34,20 +34,20 @@ impl GameManager {
             Heard::WatchStarted => {
                 let names = self.watched.names().join(", ");
                 self.log(
-                    LogLevel::Info,
+                    LogLevel::INFO,
                     format!("watching the heartbeats of {names}"),
                 );
             }
             // Back within the timeout: it was never lost, but its state is new.
             Heard::Restarted { old_pid } => self.log(
-                LogLevel::Warn,
+                LogLevel::WARN,
                 format!(
                     "node {} restarted (pid {old_pid} -> {}) within the loss timeout",
                     hb.node_name, hb.pid
                 ),
             ),
             Heard::Twice { other_pid } => self.log(
-                LogLevel::Warn,
+                LogLevel::WARN,
                 format!(
                     "two processes beat as node {} (pids {other_pid} and {}): it was started \
                      twice; stop one, as each answers, publishes and writes on its own",
@@ -92,7 +92,6 @@ impl GameManager {
             .map(|t| format!("only one process beats as node {} again", t.name))
             .collect();
         for line in ended {
-            self.log(LogLevel::Info, line.clone());
             self.out.push(Output::LiveLine(line));
         }
         self.twins = twins;
@@ -139,7 +138,7 @@ impl GameManager {
 
     /// Silences the robot and holds the session.
     fn on_nodes_lost(&mut self, what: &str, now: i64) {
-        self.log(LogLevel::Warn, format!("node lost: {what}"));
+        self.log(LogLevel::WARN, format!("node lost: {what}"));
         let running = self.session_running();
         let was_paused = self.paused();
         if running
@@ -174,7 +173,6 @@ impl GameManager {
             "node {name} is back (pid {pid}) after {:.1} s lost",
             seconds(lost_for)
         );
-        self.log(LogLevel::Info, back.clone());
         self.out.push(Output::LiveLine(back.clone()));
         if !self.lost_nodes().is_empty() {
             self.status = back;
@@ -201,7 +199,7 @@ impl GameManager {
             self.publish_state(now);
         } else {
             self.log(
-                LogLevel::Info,
+                LogLevel::INFO,
                 format!(
                     "resumed after {:.1} s held for lost nodes",
                     seconds(now - held_since)

@@ -251,31 +251,54 @@ fn bad_commands_are_rejected_with_a_reason_and_the_session_goes_on() {
 }
 
 #[test]
-fn every_command_is_confirmed_by_a_state_that_names_it() {
+fn every_command_is_answered_by_a_state_with_its_outcome() {
     // The console waits for such a state before it exits (and sends the command again if it
-    // sees none), so each accepted or refused command must publish one, in every phase.
-    let names_it = |out: &[Output], id: u64| {
-        out.iter()
-            .any(|o| matches!(o, Output::State(s) if s.status.contains(&format!("command {id}"))))
+    // sees none), so each accepted or refused command must publish one, in every phase, with
+    // the typed answer it reads (never the status text).
+    let answer = |out: &[Output], id: u64| -> Option<(u8, String)> {
+        out.iter().rev().find_map(|o| match o {
+            Output::State(s) if s.command_session_id == "s" && s.command_id == id => {
+                Some((s.command_outcome, s.command_refusal.clone()))
+            }
+            _ => None,
+        })
     };
+    let done = Some((GameState::COMMAND_CARRIED_OUT, String::new()));
     let mut h = harness();
-    h.start("s");
+    let out = h.feed(cmd(C::START, "s", 1));
+    assert_eq!(answer(&out, 1), done, "start: {out:?}");
     h.run_until(T0 + 15 * S);
     assert_eq!(h.last_state().phase, GameState::WAITING_FOR_ANSWER);
     let out = h.feed(cmd(C::PAUSE, "s", 2));
-    assert!(names_it(&out, 2), "pause: {out:?}");
+    assert_eq!(answer(&out, 2), done, "pause: {out:?}");
     let out = h.feed(override_to(3, "s", 3));
-    assert!(names_it(&out, 3), "override while paused: {out:?}");
+    assert_eq!(answer(&out, 3), done, "override while paused: {out:?}");
     let out = h.feed(cmd(C::RESUME, "s", 4));
-    assert!(names_it(&out, 4), "resume: {out:?}");
+    assert_eq!(answer(&out, 4), done, "resume: {out:?}");
     let out = h.feed(cmd(C::RESUME, "s", 4));
-    assert!(names_it(&out, 4), "a repeat is refused by name: {out:?}");
+    assert_eq!(
+        answer(&out, 4),
+        Some((
+            GameState::COMMAND_ALREADY_CARRIED_OUT,
+            "duplicate command id 4".into()
+        )),
+        "a repeat is answered as one: {out:?}"
+    );
     // While deciding sequence 2 (the override applies at once).
     h.run_until_true(60.0, |h| h.last_state().phase == GameState::DECIDING);
     let out = h.feed(override_to(1, "s", 5));
-    assert!(names_it(&out, 5), "override while deciding: {out:?}");
+    assert_eq!(answer(&out, 5), done, "override while deciding: {out:?}");
     let out = h.feed(cmd(C::STOP, "s", 6));
-    assert!(names_it(&out, 6), "stop: {out:?}");
+    assert_eq!(answer(&out, 6), done, "stop: {out:?}");
     let out = h.feed(cmd(C::EMERGENCY_STOP, "s", 7));
-    assert!(names_it(&out, 7), "emergency stop after the end: {out:?}");
+    assert_eq!(
+        answer(&out, 7),
+        Some((
+            GameState::COMMAND_REFUSED,
+            "session has already ended (stopped)".into()
+        )),
+        "emergency stop after the end: {out:?}"
+    );
+    // The answer stays in later states until another command is answered.
+    assert_eq!(h.last_state().command_id, 7);
 }

@@ -432,7 +432,7 @@ impl Harness {
         self.outputs()
             .filter_map(|o| match o {
                 Output::Log {
-                    level: crate::protocol::LogLevel::Warn,
+                    level: crate::protocol::LogLevel::WARN,
                     message,
                 } => Some(message.clone()),
                 _ => None,

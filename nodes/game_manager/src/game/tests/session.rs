@@ -22,6 +22,27 @@ fn scripted_session(params: GameManagerParams) -> Harness {
 }
 
 #[test]
+fn a_shorter_session_says_its_length_in_every_result_and_state() {
+    let params = GameManagerParams {
+        sequences_per_session: 5,
+        ..GameManagerParams::default()
+    };
+    let h = scripted_session(params);
+    let results = h.results();
+    assert_eq!(results.len(), 5);
+    assert!(results.iter().all(|r| r.sequences_planned == 5));
+    assert_eq!(results[4].sequence_index, results[4].sequences_planned);
+    let states = h.states();
+    assert!(
+        states
+            .iter()
+            .filter(|g| !g.session_id.is_empty())
+            .all(|g| g.sequences_planned == 5)
+    );
+    assert_eq!(h.last_state().phase, GameState::FINISHED);
+}
+
+#[test]
 fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
     let h = scripted_session(GameManagerParams::default());
     let results = h.results();
@@ -49,12 +70,9 @@ fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
             r.activity_result,
             if right { f32::from(r.level) } else { -1.0 }
         );
-        state = State::new(
-            r.level.into(),
-            r.feedback.into(),
-            i64::from(r.level) * i64::from(r.outcome),
-        )
-        .expect("next state");
+        state =
+            State::new(r.level.into(), r.feedback.into(), r.score().into()).expect("next state");
+        assert_eq!(r.sequences_planned, 10);
         assert_eq!(h.records()[k].result, *r, "the file gets what is published");
     }
     let outcomes: Vec<i8> = results.iter().map(|r| r.outcome).collect();

@@ -11,10 +11,7 @@ fn stopping_the_game_closes_the_task_and_stale_tasks_stay_closed() {
     }));
     // The transient-local topic re-delivers the last task, and an older one arrives late.
     for seq in [7, 6] {
-        assert!(
-            b.dds(DdsInput::Task(task("s1", seq, 3)), at(200))
-                .is_empty()
-        );
+        assert!(silent(&b.dds(DdsInput::Task(task("s1", seq, 3)), at(200))));
     }
     let out = b.ws_text(c, &answer(7, &["sad", "sad", "sad"]), at(300));
     assert_eq!(
@@ -31,7 +28,7 @@ fn a_bridge_started_after_the_session_ended_ignores_its_last_task() {
     let mut b = Bridge::new(params(), at(0));
     let c = child(&mut b);
     b.dds(DdsInput::GameState(game(GameState::FINISHED, "s1")), at(0));
-    assert!(b.dds(DdsInput::Task(task("s1", 9, 3)), at(0)).is_empty());
+    assert!(silent(&b.dds(DdsInput::Task(task("s1", 9, 3)), at(0))));
     let out = b.ws_text(c, &answer(9, &["sad", "sad", "sad"]), at(10));
     assert_eq!(
         reasons(&out, c),

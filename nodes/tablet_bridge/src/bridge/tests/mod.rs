@@ -15,6 +15,21 @@ mod watch;
 const PIN: &str = "2468";
 const WALL0: i64 = 1_700_000_000_000_000_000;
 
+/// Nothing for a page or DDS: at most lines for the log.
+fn silent(out: &[Output]) -> bool {
+    out.iter().all(|o| matches!(o, Output::Log(..)))
+}
+
+/// The log lines of `out`.
+fn logged(out: &[Output]) -> Vec<(tracing::Level, &str)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Log(level, line) => Some((*level, line.as_str())),
+            _ => None,
+        })
+        .collect()
+}
+
 fn params() -> TabletBridgeParams {
     TabletBridgeParams {
         pin: PIN.into(),

@@ -1,0 +1,65 @@
+//! The game manager's phases (`GameState.phase`) by name, and which of them are a session
+//! under way: the therapist console, the tablet bridge and its pages all read them from here.
+
+use crate::GameState;
+
+/// The phases by name, indexed by `GameState.phase`.
+pub const PHASES: [&str; 9] = [
+    "idle",
+    "deciding",
+    "giving_feedback",
+    "saying_sequence",
+    "waiting_for_answer",
+    "paused",
+    "finished",
+    "stopped",
+    "emergency_stopped",
+];
+
+impl GameState {
+    /// The name of `phase` (`saying_sequence`), `unknown` outside the list.
+    pub fn phase_name(phase: u8) -> &'static str {
+        PHASES.get(usize::from(phase)).copied().unwrap_or("unknown")
+    }
+
+    /// Whether `phase` is a sequence under way (not idle, paused or ended).
+    pub fn is_running(phase: u8) -> bool {
+        matches!(
+            phase,
+            GameState::DECIDING
+                | GameState::GIVING_FEEDBACK
+                | GameState::SAYING_SEQUENCE
+                | GameState::WAITING_FOR_ANSWER
+        )
+    }
+
+    /// Whether `phase` ends a session.
+    pub fn is_ended(phase: u8) -> bool {
+        matches!(
+            phase,
+            GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_follow_the_constants() {
+        assert_eq!(GameState::phase_name(GameState::IDLE), "idle");
+        assert_eq!(
+            GameState::phase_name(GameState::WAITING_FOR_ANSWER),
+            "waiting_for_answer"
+        );
+        assert_eq!(
+            GameState::phase_name(GameState::EMERGENCY_STOPPED),
+            "emergency_stopped"
+        );
+        assert_eq!(GameState::phase_name(9), "unknown");
+        assert!(GameState::is_running(GameState::SAYING_SEQUENCE));
+        assert!(!GameState::is_running(GameState::PAUSED));
+        assert!(GameState::is_ended(GameState::STOPPED) && !GameState::is_ended(GameState::IDLE));
+    }
+}
