@@ -212,8 +212,10 @@ impl GameManagerParams {
                 format!("{} is not in (0, 10]", self.time_scale),
             );
         }
-        seconds("answer_timeout_s", self.answer_timeout_s, 0.001, 3600.0)?;
-        if self.answer_timeout_s * self.time_scale > 3600.0 {
+        // The task's timeout is checked with the answer rules' limit by every reader.
+        let max = sequence_game::answer::MAX_RESPONSE_TIME_S;
+        seconds("answer_timeout_s", self.answer_timeout_s, 0.001, max)?;
+        if self.answer_timeout_s * self.time_scale > max {
             return bad(
                 "answer_timeout_s",
                 "times time_scale must be at most 3600 s",

@@ -248,7 +248,11 @@ pub fn engagement_figures(log: &SessionLog) -> Vec<EngagementFigure> {
         .filter(|w| w[0].level != w[1].level)
         .map(|w| &w[0])
         .chain(log.results.last())
-        .map(|r| (since_start(r.header.stamp.to_nanos()), 2 * r.level + 1))
+        .map(|r| {
+            let length = sequence_game::Level::new(r.level.into())
+                .map_or(0, |l| l.sequence_length() as u8);
+            (since_start(r.header.stamp.to_nanos()), length)
+        })
         .collect();
     let mut sources: Vec<&str> = Vec::new();
     for e in &log.engagement {
