@@ -249,8 +249,8 @@ pub fn engagement_figures(log: &SessionLog) -> Vec<EngagementFigure> {
         .map(|w| &w[0])
         .chain(log.results.last())
         .map(|r| {
-            let length = sequence_game::Level::new(r.level.into())
-                .map_or(0, |l| l.sequence_length() as u8);
+            let length =
+                sequence_game::Level::new(r.level.into()).map_or(0, |l| l.sequence_length() as u8);
             (since_start(r.header.stamp.to_nanos()), length)
         })
         .collect();
