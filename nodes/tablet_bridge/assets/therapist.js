@@ -202,7 +202,7 @@ function onMessage(m) {
       // reconnected, or the bridge was restarted) starts its tables afresh, not twice over.
       $("decisions").tBodies[0].replaceChildren();
       $("results").tBodies[0].replaceChildren();
-      showTotal();
+      $("g-total").textContent = "–";
       show("main");
       break;
     case "game": showGame(m); break;
