@@ -78,7 +78,7 @@ mapfile -t launch_keys < <(yaml_keys ../launch_scripts/*.yaml ../tests/launch/*.
   sed -nE 's/^    ([a-z_]+): .*/\1:/p' ../tools/launcher/src/description.rs)
 write_dict "$seeds/launch_file.dict" "${launch_keys[@]}" "${edge_values[@]}" "- " "{" "}" \
   "\$(var " "\$(env " "\$(find-pkg-share " "\$(" ")" "'" "\"" true false True False \
-  screen log both shutdown
+  screen log both shutdown "if:" "unless:"
 
 # PLATEAU=S: stop a target once its edge coverage ("cov:" in libFuzzer's status lines, not
 # the slowly growing "ft:" features) has not grown for S seconds: a plateau, written to the log.

@@ -457,7 +457,9 @@ impl GameDriver {
             Output::SetTimer { id, at_ns } => {
                 self.timers.insert((at_ns, id));
             }
-            Output::Record(_)
+            // The sample sessions were recorded with the topics backend: no robot steps.
+            Output::AwaitRobot { .. }
+            | Output::Record(_)
             | Output::Journal(_)
             | Output::Summary(_)
             | Output::LiveLine(_)

@@ -417,14 +417,20 @@ echo "launch_exit=$?"
     assert_eq!(indices, (1..=10).collect::<Vec<u8>>(), "tasks: {tasks:?}");
     assert_eq!(ids.len(), tasks.len(), "a task id sent twice: {tasks:?}");
 
-    // Privacy: the bag holds the suite's features and events, never an image or a sound.
+    // Privacy: the bag holds the suite's features and events, never an image or a sound
+    // (ROS4HRI's list of tracked persons is ids only).
     let types: std::collections::BTreeSet<String> = reader
         .channels()
         .map(|c| c.type_name().to_string())
         .collect();
     assert!(
         types.iter().all(|t| t.starts_with("qt_therapy_msgs/")
-            || ["std_msgs/msg/String", "rcl_interfaces/msg/Log"].contains(&t.as_str())),
+            || [
+                "std_msgs/msg/String",
+                "rcl_interfaces/msg/Log",
+                "hri_msgs/msg/IdsList"
+            ]
+            .contains(&t.as_str())),
         "unexpected types in the bag: {types:?}"
     );
     eprintln!("bag channel types: {types:?}");

@@ -4,9 +4,11 @@
 //! peer, and names itself `qt_therapy_msgs::msg::dds_::<Type>_` on DDS.
 
 pub mod definition;
+pub mod hri_msgs;
 pub mod live_line;
 pub mod messages;
 pub mod phases;
+pub mod qt_robot_interface;
 pub mod results;
 pub mod sequence_engagement;
 pub mod services;

@@ -15,7 +15,7 @@ pub trait ServiceDefinition {
 }
 
 /// The request (`half == 0`) or response (`half == 1`) part of a `.srv` text.
-fn srv_half(text: &'static str, half: usize) -> &'static str {
+pub(crate) fn srv_half(text: &'static str, half: usize) -> &'static str {
     let mut parts = text.splitn(2, "\n---\n");
     let request = parts.next().unwrap_or("");
     match half {
@@ -39,6 +39,7 @@ macro_rules! ros_service {
         }
     };
 }
+pub(crate) use ros_service;
 
 ros_message! {
     pub struct PredictUserRequest(PKG, "PredictUser_Request", srv_half(include_str!("../srv/PredictUser.srv"), 0)) {

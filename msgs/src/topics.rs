@@ -2,6 +2,7 @@
 //! the recorder and the README agree. Robot output uses QTrobot's own topic names.
 
 use crate::definition::MessageDefinition;
+use crate::hri_msgs::{EngagementLevel, IdsList};
 use crate::messages::*;
 use crate::services::{AssignCluster, DecideAction, PredictUser, ServiceDefinition};
 use crate::standard::std_msgs::StringMsg;
@@ -130,6 +131,30 @@ pub const ROBOT_EMOTION: Topic<StringMsg> = Topic::new("/qt_robot/emotion/show",
 /// QTrobot's recorded gestures, e.g. `QT/happy`.
 pub const ROBOT_GESTURE: Topic<StringMsg> = Topic::new("/qt_robot/gesture/play", QosKind::Reliable);
 
+/// ROS4HRI (REP-155): the ids of the persons tracked, latched as ROS4HRI's person manager does.
+pub const PERSONS_TRACKED: Topic<IdsList> = Topic::new("/humans/persons/tracked", QosKind::State);
+
+/// ROS4HRI (REP-155): a person's engagement, `/humans/persons/<person_id>/engagement_status`.
+/// The name is made once per person and kept for the process's life (a few bytes each).
+pub fn engagement_status(person_id: &str) -> Topic<EngagementLevel> {
+    let name: &'static str =
+        Box::leak(format!("/humans/persons/{person_id}/engagement_status").into_boxed_str());
+    Topic::new(name, QosKind::Reliable)
+}
+
+/// A ROS4HRI person id from any id: `prefix_` and the id's letters and digits, every other
+/// character an underscore (ROS names allow nothing else, no leading digit, no `__`).
+pub fn person_id(prefix: &str, id: &str) -> String {
+    let mut out = format!("{prefix}_");
+    for c in id.chars() {
+        let c = if c.is_ascii_alphanumeric() { c } else { '_' };
+        if !(c == '_' && out.ends_with('_')) {
+            out.push(c);
+        }
+    }
+    out.trim_end_matches('_').to_string()
+}
+
 pub const PREDICT_USER: Service<PredictUser> = Service::new("/qt_therapy/user_model/predict");
 pub const ASSIGN_CLUSTER: Service<AssignCluster> =
     Service::new("/qt_therapy/user_model/assign_cluster");
@@ -155,5 +180,21 @@ pub fn all_topics() -> Vec<TopicInfo> {
         ROBOT_SPEECH.info(),
         ROBOT_EMOTION.info(),
         ROBOT_GESTURE.info(),
+        PERSONS_TRACKED.info(),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn person_ids_are_ros_names() {
+        assert_eq!(person_id("user", "1CZ1CL1P"), "user_1CZ1CL1P");
+        assert_eq!(person_id("user", "sim-child-1"), "user_sim_child_1");
+        assert_eq!(person_id("face", "cam front/0"), "face_cam_front_0");
+        assert_eq!(person_id("user", "a__b--"), "user_a_b");
+        let t = engagement_status(&person_id("user", "x"));
+        assert_eq!(t.name, "/humans/persons/user_x/engagement_status");
+    }
 }

@@ -339,6 +339,59 @@ impl Validate for Heartbeat {
     }
 }
 
+impl Validate for crate::hri_msgs::EngagementLevel {
+    fn validate(&self) -> Result<(), InvalidMessage> {
+        check_range(
+            "EngagementLevel",
+            "level",
+            self.level,
+            Self::UNKNOWN,
+            Self::DISENGAGING,
+        )
+    }
+}
+
+impl Validate for crate::hri_msgs::IdsList {
+    fn validate(&self) -> Result<(), InvalidMessage> {
+        for id in &self.ids {
+            check_id("IdsList", "ids[]", id, true)?;
+        }
+        Ok(())
+    }
+}
+
+/// QTrobot's service halves: any text and name; a gesture's speed a finite factor.
+macro_rules! valid_as_is {
+    ($($t:ty),*) => {$(
+        impl Validate for $t {
+            fn validate(&self) -> Result<(), InvalidMessage> {
+                Ok(())
+            }
+        }
+    )*};
+}
+valid_as_is!(
+    crate::qt_robot_interface::SpeechSayRequest,
+    crate::qt_robot_interface::SpeechSayResponse,
+    crate::qt_robot_interface::SpeechStopRequest,
+    crate::qt_robot_interface::SpeechStopResponse,
+    crate::qt_robot_interface::EmotionShowRequest,
+    crate::qt_robot_interface::EmotionShowResponse,
+    crate::qt_robot_interface::GesturePlayResponse
+);
+
+impl Validate for crate::qt_robot_interface::GesturePlayRequest {
+    fn validate(&self) -> Result<(), InvalidMessage> {
+        if !(self.speed.is_finite() && self.speed >= 0.0) {
+            return fail(
+                "GesturePlay request",
+                format!("speed = {} is not a factor >= 0", self.speed),
+            );
+        }
+        Ok(())
+    }
+}
+
 impl Validate for crate::std_msgs::StringMsg {
     fn validate(&self) -> Result<(), InvalidMessage> {
         Ok(())

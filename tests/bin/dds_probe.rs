@@ -1,8 +1,9 @@
 //! A DDS peer for the cross-process tests. `responder` subscribes to the tablet answers and
 //! serves `PredictUser`; `caller` publishes answers (good, out of range, and undecodable),
 //! calls the service and lingers; `logger` logs lines (to `/rosout` through the shell) and
-//! `rosout-reader` prints the `/rosout` records it receives. Each prints one JSON line per
-//! event, so a test can check what crossed.
+//! `rosout-reader` prints the `/rosout` records it receives; `estimates` prints the engagement
+//! classifier's per-frame estimates. Each prints one JSON line per event, so a test can check
+//! what crossed.
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -45,6 +46,12 @@ enum Role {
         #[arg(long, default_value_t = 3)]
         seconds: u64,
     },
+    /// Print every EngagementEstimate received (after `ready`) until SIGINT/SIGTERM, and the
+    /// ROS4HRI persons tracked and `person`'s engagement levels.
+    Estimates {
+        #[arg(long, default_value = "face_camera_0")]
+        person: String,
+    },
 }
 
 fn emit(event: serde_json::Value) {
@@ -74,6 +81,7 @@ async fn main() -> anyhow::Result<()> {
             shell.shutdown_signal().await;
         }
         Role::RosoutReader { seconds } => rosout_reader(&mut shell, seconds).await?,
+        Role::Estimates { person } => estimates(&mut shell, &person).await?,
     }
     shell.stop().await;
     Ok(())
@@ -243,6 +251,31 @@ async fn rosout_reader(shell: &mut NodeShell, seconds: u64) -> anyhow::Result<()
             Some(Ok((log, _))) = records.next() => {
                 emit(serde_json::json!({"event": "rosout", "name": log.name, "msg": log.msg}));
             }
+        }
+    }
+    Ok(())
+}
+
+async fn estimates(shell: &mut NodeShell, person: &str) -> anyhow::Result<()> {
+    use qt_therapy_msgs::topics::{PERSONS_TRACKED, engagement_status};
+    let mut estimates = shell.subscribe(qt_therapy_msgs::topics::ENGAGEMENT_ESTIMATE, 4096)?;
+    let mut tracked = shell.subscribe(PERSONS_TRACKED, 64)?;
+    let mut levels = shell.subscribe(engagement_status(person), 256)?;
+    emit(serde_json::json!({"event": "ready"}));
+    let stop = shell.shutdown_signal();
+    tokio::pin!(stop);
+    loop {
+        tokio::select! {
+            _ = &mut stop => break,
+            Some(e) = estimates.recv() => emit(serde_json::json!({
+                "event": "estimate", "face_id": e.face_id, "frame_id": e.header.frame_id,
+                "stamp_ns": e.header.stamp.to_nanos(), "label": e.label,
+            })),
+            Some(t) = tracked.recv() => emit(serde_json::json!({"event": "tracked", "ids": t.ids})),
+            Some(l) = levels.recv() => emit(serde_json::json!({
+                "event": "engagement_status", "level": l.level,
+                "stamp_ns": l.header.stamp.to_nanos(),
+            })),
         }
     }
     Ok(())

@@ -34,6 +34,10 @@ struct Cli {
     /// and override (id 2) again, then resume it with this id, twice.
     #[arg(long)]
     resume_recovered: Option<u64>,
+    /// Resume the session whenever it pauses on its own (ids from 10 up), as a therapist
+    /// would after the robot failed.
+    #[arg(long)]
+    resume_paused: bool,
     #[command(flatten)]
     shell: ShellOptions,
 }
@@ -181,6 +185,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
     let (answer_tx, mut due_answers) = tokio::sync::mpsc::channel::<TabletAnswer>(16);
     let mut shown: Vec<String> = Vec::new();
     let mut overridden = false;
+    let mut next_command_id = 10;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     let deadline = tokio::time::sleep(Duration::from_secs(cli.timeout_s));
     tokio::pin!(deadline);
@@ -221,6 +226,12 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                     c.level = level;
                     commands.send(c);
                     overridden = true;
+                }
+                if cli.resume_paused && s.phase == GameState::PAUSED && s.session_id == cli.session {
+                    let c = command(TherapistCommand::RESUME, &cli.session, next_command_id);
+                    next_command_id += 1;
+                    emit(serde_json::json!({"event": "resuming", "status": s.status}));
+                    commands.send(c);
                 }
                 if s.phase == GameState::FINISHED {
                     let grace = tokio::time::sleep(qt_therapy_msgs::live_line::LAST_RESULT_GRACE);

@@ -47,6 +47,7 @@ pub fn for_each_suite_type<P: PerType>(per: &P) -> Vec<P::Made> {
         per.make::<UserModelInfo>(),
         per.make::<Heartbeat>(),
         per.make::<std_msgs::StringMsg>(),
+        per.make::<hri_msgs::IdsList>(),
     ]
 }
 

@@ -657,6 +657,11 @@ impl<S: ServiceDefinition> Clone for ServiceClient<S> {
 }
 
 impl<S: ServiceDefinition> ServiceClient<S> {
+    /// The service's name.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+
     pub async fn call(
         &self,
         request: S::Request,

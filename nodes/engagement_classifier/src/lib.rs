@@ -12,6 +12,7 @@ pub mod messages;
 pub mod model;
 pub mod params;
 pub mod preprocessing;
+pub mod ros4hri;
 pub mod smoothing;
 pub mod study;
 pub mod train;

@@ -43,6 +43,15 @@ pub struct EngagementClassifierParams {
     pub decimal_repair: String,
     /// Seed of the synthetic generator.
     pub seed: i64,
+    /// Also publish the per-second engagement the ROS4HRI way (REP-155).
+    pub ros4hri: bool,
+    /// Smoothed expected engagement at or above this: ENGAGED.
+    pub ros4hri_engaged_threshold: f64,
+    /// At or below this: DISENGAGED; between the two, ENGAGING when it rose since the
+    /// person's last second, DISENGAGING when it fell.
+    pub ros4hri_disengaged_threshold: f64,
+    /// A person without a second for this long leaves /humans/persons/tracked, s.
+    pub ros4hri_tracked_timeout_s: f64,
 }
 
 impl Default for EngagementClassifierParams {
@@ -63,6 +72,10 @@ impl Default for EngagementClassifierParams {
             neutral_label: "engaged".into(),
             decimal_repair: "magnitude".into(),
             seed: 7,
+            ros4hri: true,
+            ros4hri_engaged_threshold: 0.5,
+            ros4hri_disengaged_threshold: -0.5,
+            ros4hri_tracked_timeout_s: 5.0,
         }
     }
 }
@@ -157,6 +170,29 @@ impl EngagementClassifierParams {
             "reg_lambda",
             lambda,
             ">= 0",
+        )?;
+        let (up, down) = (
+            self.ros4hri_engaged_threshold,
+            self.ros4hri_disengaged_threshold,
+        );
+        check(
+            (-1.0..=1.0).contains(&up),
+            "ros4hri_engaged_threshold",
+            up,
+            "in [-1, 1]",
+        )?;
+        check(
+            (-1.0..=up).contains(&down),
+            "ros4hri_disengaged_threshold",
+            down,
+            "in [-1, ros4hri_engaged_threshold]",
+        )?;
+        let t = self.ros4hri_tracked_timeout_s;
+        check(
+            t > 0.0 && t.is_finite(),
+            "ros4hri_tracked_timeout_s",
+            t,
+            "> 0",
         )?;
         self.load_options()?;
         Ok(())

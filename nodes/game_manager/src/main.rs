@@ -1,9 +1,12 @@
 //! `game_manager run`: the game manager node. Moves messages between DDS and the sans-IO core
 //! (`GameManager`): therapist commands, tablet answers, engagement and heartbeats in; robot speech, faces,
-//! gestures, tablet tasks, game states and results out; DecideAction calls with a deadline;
-//! the core's timers; session files; one live line per sequence on stdout. At start-up, a
-//! session a killed predecessor left unfinished in the sessions directory is taken over.
+//! gestures (QTrobot's topics or services, `robot.rs`), tablet tasks, game states and results
+//! out; DecideAction calls with a deadline; the core's timers; session files; the operator's
+//! lines in the log. At start-up, a session a killed predecessor left unfinished in the
+//! sessions directory is taken over.
 //!   game_manager run [--sessions-dir DIR] [--params-file params/game_manager.yaml]
+
+mod robot;
 
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
@@ -12,12 +15,12 @@ use game_manager::session_file::SessionFiles;
 use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
 use node_shell::instance_lock::InstanceLock;
 use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
-use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{
-    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,
-    ROBOT_SPEECH, SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
+    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_ANSWER,
+    TABLET_TASK, THERAPIST_COMMAND,
 };
 use qt_therapy_msgs::{DecideAction, GameState, SequenceResult, TabletTask};
+use robot::{Act, Robot};
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -47,9 +50,6 @@ struct RunArgs {
 
 /// The node's publishers.
 struct Outboxes {
-    speech: Outbox<StringMsg>,
-    emotion: Outbox<StringMsg>,
-    gesture: Outbox<StringMsg>,
     task: Outbox<TabletTask>,
     state: Outbox<GameState>,
     result: Outbox<SequenceResult>,
@@ -89,9 +89,6 @@ async fn run(
         .with_context(|| format!("parameter file {}", params_file.display()))?;
     let mut files = SessionFiles::new(&params.sessions_dir);
     let out = Outboxes {
-        speech: shell.publisher(ROBOT_SPEECH)?,
-        emotion: shell.publisher(ROBOT_EMOTION)?,
-        gesture: shell.publisher(ROBOT_GESTURE)?,
         task: shell.publisher(TABLET_TASK)?,
         state: shell.publisher(GAME_STATE)?,
         result: shell.publisher(SEQUENCE_RESULT)?,
@@ -102,7 +99,10 @@ async fn run(
     // Every node's 10 Hz heartbeat; the core watches those named in watched_nodes.
     let mut heartbeats = shell.subscribe(HEARTBEAT, 256)?;
     let policy = shell.client(DECIDE_ACTION)?;
+    // Inputs from tasks of ours: the policy's answers and the robot's steps.
     let (decided_tx, mut decided) = mpsc::channel::<Input>(16);
+    let mut robot = Robot::new(shell, &params, decided_tx.clone())?;
+    robot.check(shell, Duration::from_secs(5)).await;
     // (due time, timer id) of the timers the core asked for.
     let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
     if params.policy_startup_wait_s > 0.0 {
@@ -141,6 +141,7 @@ async fn run(
         timers: &mut timers,
         policy: &policy,
         decided: &decided_tx,
+        robot: &mut robot,
     };
     ctx.apply(initial);
     let stop = shell.shutdown_signal();
@@ -225,21 +226,17 @@ struct Dispatch<'a> {
     timers: &'a mut BTreeSet<(i64, u64)>,
     policy: &'a node_shell::ServiceClient<DecideAction>,
     decided: &'a mpsc::Sender<Input>,
+    robot: &'a mut Robot,
 }
 
 impl Dispatch<'_> {
     fn apply(&mut self, outputs: Vec<Output>) {
         for o in outputs {
             match o {
-                Output::Say(s) => {
-                    self.out.speech.send(StringMsg { data: s });
-                }
-                Output::ShowEmotion(s) => {
-                    self.out.emotion.send(StringMsg { data: s });
-                }
-                Output::PlayGesture(s) => {
-                    self.out.gesture.send(StringMsg { data: s });
-                }
+                Output::Say(s) => self.robot.act(Act::Say(s)),
+                Output::ShowEmotion(s) => self.robot.act(Act::Emotion(s)),
+                Output::PlayGesture(s) => self.robot.act(Act::Gesture(s)),
+                Output::AwaitRobot { step } => self.robot.await_step(step),
                 Output::Task(t) => {
                     self.out.task.send(t);
                 }
@@ -307,5 +304,6 @@ impl Dispatch<'_> {
                 Output::Log { level, message } => node_shell::logging::log_at(level, &message),
             }
         }
+        self.robot.detach();
     }
 }

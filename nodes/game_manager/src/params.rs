@@ -76,6 +76,22 @@ pub struct GameManagerParams {
     /// node was killed) and active at most this many seconds ago is taken over, paused, and
     /// goes on at the therapist's resume; older ones are left as they are. 0: never.
     pub recovery_max_age_s: f64,
+    /// How the robot is driven: `topics` (QTrobot's std_msgs/String topics; the game waits
+    /// the estimated speaking times) or `qtrobot` (its services, each returning when the
+    /// robot has finished: the game waits for them).
+    pub robot_backend: String,
+    /// `qtrobot`: a call not answered within this many seconds (real time) fails; the
+    /// session is then paused with the reason.
+    pub robot_call_timeout_s: f64,
+    /// `qtrobot`: the gesture speed factor sent with every gesture.
+    pub robot_gesture_speed: f64,
+}
+
+/// How the robot is driven (`robot_backend`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotBackend {
+    Topics,
+    QtRobot,
 }
 
 fn strings(v: &[&str]) -> Vec<String> {
@@ -148,6 +164,9 @@ impl Default for GameManagerParams {
             node_loss_timeout_s: 4.0,
             auto_resume_after_node_loss: true,
             recovery_max_age_s: 3600.0,
+            robot_backend: "topics".into(),
+            robot_call_timeout_s: 60.0,
+            robot_gesture_speed: 1.0,
         }
     }
 }
@@ -275,7 +294,26 @@ impl GameManagerParams {
                 return bad("watched_nodes", format!("{name:?} is listed twice"));
             }
         }
+        self.robot_backend()?;
+        seconds(
+            "robot_call_timeout_s",
+            self.robot_call_timeout_s,
+            0.1,
+            3600.0,
+        )?;
+        seconds("robot_gesture_speed", self.robot_gesture_speed, 0.0, 10.0)?;
         Ok(())
+    }
+
+    pub fn robot_backend(&self) -> Result<RobotBackend, ParamError> {
+        match self.robot_backend.as_str() {
+            "topics" => Ok(RobotBackend::Topics),
+            "qtrobot" => Ok(RobotBackend::QtRobot),
+            other => Err(ParamError {
+                key: "robot_backend",
+                reason: format!("{other:?} is not topics or qtrobot"),
+            }),
+        }
     }
 
     /// Robot speaking time for a sequence of `emotions` words, in unscaled seconds.

@@ -29,6 +29,10 @@ pub enum Input {
     Heartbeat(Heartbeat),
     /// A timer the core asked for with [`Output::SetTimer`] is due.
     TimerFired { id: u64 },
+    /// `qtrobot` backend: every robot call of the step [`Output::AwaitRobot`] named finished.
+    RobotDone { step: u64 },
+    /// `qtrobot` backend: a call of the step failed or was not answered in time.
+    RobotFailed { step: u64, reason: String },
     /// The node is going down: save the session.
     Shutdown { reason: String },
 }
@@ -46,6 +50,12 @@ pub enum Output {
     ShowEmotion(String),
     /// `/qt_robot/gesture/play`.
     PlayGesture(String),
+    /// `qtrobot` backend: the robot acts put out since the previous `AwaitRobot` (or since the
+    /// start of this batch of outputs) are one step; answer with `Input::RobotDone` once every
+    /// call of it has returned, or `Input::RobotFailed`.
+    AwaitRobot {
+        step: u64,
+    },
     Task(TabletTask),
     State(GameState),
     Result(SequenceResult),

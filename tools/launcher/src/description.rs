@@ -58,6 +58,20 @@ struct ExecutableAction {
     respawn_delay: Option<String>,
     /// `shutdown`: when this process ends, stop the whole launch (as XML's on_exit).
     on_exit: Option<String>,
+    /// Start the process only if this is true (ROS 2's `if`: true, false, 1 or 0).
+    #[serde(rename = "if")]
+    if_true: Option<String>,
+    /// Start the process only if this is false (ROS 2's `unless`).
+    unless: Option<String>,
+}
+
+/// A launch condition's value as ROS 2 reads it.
+fn condition(value: &str) -> Option<bool> {
+    match value.trim().to_ascii_lowercase().as_str() {
+        "true" | "1" => Some(true),
+        "false" | "0" => Some(false),
+        _ => None,
+    }
 }
 
 /// Where a process's output lines go (`output:` of an executable, as in ROS 2 launch).
@@ -134,6 +148,24 @@ pub fn parse_launch(
                 global_env.push((e.name, substitute(&e.value, &vars).map_err(invalid)?));
             }
             Action::Executable(x) => {
+                let mut wanted = true;
+                for (key, value, start_if) in
+                    [("if", &x.if_true, true), ("unless", &x.unless, false)]
+                {
+                    if let Some(v) = value {
+                        let v = substitute(v, &vars).map_err(invalid)?;
+                        let b = condition(&v).ok_or_else(|| {
+                            invalid(format!(
+                                "{}: {key} {v:?} is not true, false, 1 or 0",
+                                x.name.as_deref().unwrap_or(&x.cmd)
+                            ))
+                        })?;
+                        wanted &= b == start_if;
+                    }
+                }
+                if !wanted {
+                    continue;
+                }
                 let cmd = substitute(&x.cmd, &vars).map_err(invalid)?;
                 let mut words = shlex::split(&cmd)
                     .ok_or_else(|| invalid(format!("cmd {cmd:?} has unbalanced quotes")))?;
@@ -350,5 +382,33 @@ launch:
         }
         let e = parse("launch:\n- arg: {name: x}\n", &[]).expect_err("no default");
         assert!(e.to_string().contains("x:=VALUE"), "{e}");
+        let e = parse(
+            "launch:\n- executable: {cmd: a, name: cam, if: perhaps}\n",
+            &[],
+        )
+        .expect_err("bad condition");
+        assert!(
+            e.to_string().contains("cam: if \"perhaps\" is not true"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn if_and_unless_start_a_process_or_leave_it_out() {
+        let text = "launch:\n\
+            - arg: {name: camera, default: \"false\"}\n\
+            - executable: {cmd: bridge, if: $(var camera)}\n\
+            - executable: {cmd: stand_in, unless: $(var camera)}\n\
+            - executable: {cmd: always}\n";
+        let names = |camera: &str| -> Vec<String> {
+            parse(text, &[("camera", camera)])
+                .expect("parses")
+                .into_iter()
+                .map(|p| p.name)
+                .collect()
+        };
+        assert_eq!(names("false"), ["stand_in", "always"]);
+        assert_eq!(names("True"), ["bridge", "always"]);
+        assert_eq!(names("1"), ["bridge", "always"]);
     }
 }

@@ -86,6 +86,14 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
         },
     );
     s.put(
+        PERSONS_TRACKED,
+        5,
+        qt_therapy_msgs::hri_msgs::IdsList {
+            header: header(5),
+            ids: vec!["user_child_07".into()],
+        },
+    );
+    s.put(
         THERAPIST_COMMAND,
         10,
         TherapistCommand {

@@ -1,15 +1,23 @@
 //! `engagement_classifier run`: the DDS node. OpenFace frames in; per frame an
-//! `EngagementEstimate`, per second of message time and source an `ExpectedEngagement` out.
-//! All logic is in `EngagementEstimator`; the conversion of messages is `messages::Sources`.
+//! `EngagementEstimate`, per second of message time and source an `ExpectedEngagement` out,
+//! and with `ros4hri` the same second as a ROS4HRI person's `EngagementLevel`. All logic is in
+//! `EngagementEstimator` and `ros4hri::PersonEngagement`; the conversion of messages is
+//! `messages::Sources`.
 
 use anyhow::Context;
 use engagement_classifier::messages::Sources;
+use engagement_classifier::ros4hri::{HriOutput, PersonEngagement};
 use engagement_classifier::{
     EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome,
 };
 use node_shell::{NodeShell, Outbox, ShellOptions};
-use qt_therapy_msgs::topics::{ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, OPENFACE_FEATURES};
-use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement};
+use qt_therapy_msgs::EngagementEstimate;
+use qt_therapy_msgs::hri_msgs::EngagementLevel;
+use qt_therapy_msgs::topics::{
+    ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, GAME_STATE, OPENFACE_FEATURES, PERSONS_TRACKED,
+    engagement_status,
+};
+use std::collections::HashMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -50,14 +58,49 @@ async fn serve(args: Args) -> anyhow::Result<()> {
         let mut frames = shell.subscribe(OPENFACE_FEATURES, 512)?;
         let estimates = shell.publisher(ENGAGEMENT_ESTIMATE)?;
         let seconds = shell.publisher(EXPECTED_ENGAGEMENT)?;
+        let mut states = shell.subscribe(GAME_STATE, 16)?;
+        let tracked = if params.ros4hri {
+            Some(shell.publisher(PERSONS_TRACKED)?)
+        } else {
+            None
+        };
+        let mut persons = PersonEngagement::new(&params);
+        // One publisher per person seen (a few per session at most).
+        let mut person_topics: HashMap<String, Outbox<EngagementLevel>> = HashMap::new();
         let drops = shell.drops();
         let mut sources = Sources::default();
         let mut closed: Vec<EngagementSecond> = Vec::with_capacity(16);
-        let publish_closed = |closed: &mut Vec<EngagementSecond>,
-                              sources: &Sources,
-                              out: &Outbox<ExpectedEngagement>| {
+        let mut publish_closed = |closed: &mut Vec<EngagementSecond>,
+                                  sources: &Sources,
+                                  persons: &mut PersonEngagement,
+                                  shell: &mut NodeShell| {
             for s in closed.drain(..) {
-                out.send(sources.expected_engagement(&s));
+                let second = sources.expected_engagement(&s);
+                seconds.send(second.clone());
+                let Some(tracked) = &tracked else { continue };
+                for o in persons.on_second(&second) {
+                    match o {
+                        HriOutput::Tracked(ids) => {
+                            tracked.send(ids);
+                        }
+                        HriOutput::Engagement { person, level } => {
+                            if !person_topics.contains_key(&person) {
+                                match shell.publisher(engagement_status(&person)) {
+                                    Ok(outbox) => {
+                                        person_topics.insert(person.clone(), outbox);
+                                    }
+                                    Err(e) => {
+                                        tracing::warn!("no ROS4HRI topic for {person}: {e:#}");
+                                        continue;
+                                    }
+                                }
+                            }
+                            if let Some(outbox) = person_topics.get(&person) {
+                                outbox.send(level);
+                            }
+                        }
+                    }
+                }
             }
         };
         // Message time runs on between frames at the wall clock's pace, so a camera that stops
@@ -85,19 +128,20 @@ async fn serve(args: Args) -> anyhow::Result<()> {
                         }
                     }
                     last_stamp = Some((stamp_ns, Instant::now()));
-                    publish_closed(&mut closed, &sources, &seconds);
+                    publish_closed(&mut closed, &sources, &mut persons, &mut shell);
                 }
+                Some(g) = states.recv() => persons.on_game_state(&g),
                 _ = tick.tick() => {
                     if let Some((stamp, at)) = last_stamp {
                         let now = stamp + at.elapsed().as_nanos() as i64;
                         estimator.advance_to(now, &mut |s| closed.push(*s));
-                        publish_closed(&mut closed, &sources, &seconds);
+                        publish_closed(&mut closed, &sources, &mut persons, &mut shell);
                     }
                 }
             }
         }
         estimator.flush(&mut |s| closed.push(*s));
-        publish_closed(&mut closed, &sources, &seconds);
+        publish_closed(&mut closed, &sources, &mut persons, &mut shell);
     }
     shell.stop().await;
     Ok(())

@@ -270,7 +270,7 @@ impl GameManager {
         let intro = self.utterances.intro();
         self.act(intro);
         let at = now + self.scaled_ns(self.params.intro_time_s);
-        self.set_timer(Timer::SpeechDone, at);
+        self.after_robot(Timer::SpeechDone, at);
         self.request_decision(now);
     }
 
@@ -291,6 +291,7 @@ impl GameManager {
         match self.phase {
             Phase::GivingFeedback | Phase::SayingSequence => {
                 // A half-said sequence is not fair to the child: say it again on resume.
+                self.robot_step = None;
                 self.drop_timers(|t| {
                     !matches!(
                         t,

@@ -158,6 +158,11 @@ pub struct GameManager {
     status: String,
     /// The therapist command answered last, as every GameState tells it.
     answered: CommandAnswer,
+    /// The robot's calls are waited for (`qtrobot` backend) instead of timed.
+    robot_waits: bool,
+    /// The robot step under way and what follows it.
+    robot_step: Option<(u64, Timer)>,
+    next_robot_step: u64,
     out: Vec<Output>,
 }
 
@@ -174,6 +179,7 @@ struct CommandAnswer {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
+        let robot_waits = params.robot_backend()? == crate::params::RobotBackend::QtRobot;
         let watched = HeartbeatWatch::with_timeout_s(
             params.watched_nodes.iter().cloned(),
             params.node_loss_timeout_s,
@@ -194,6 +200,9 @@ impl GameManager {
             twins: Vec::new(),
             status: "waiting for a therapist to start a session".into(),
             answered: CommandAnswer::default(),
+            robot_waits,
+            robot_step: None,
+            next_robot_step: 1,
             out: Vec::new(),
         })
     }
@@ -246,6 +255,8 @@ impl GameManager {
                     self.on_timer(timer, now);
                 }
             }
+            Input::RobotDone { step } => self.on_robot_done(step, now),
+            Input::RobotFailed { step, reason } => self.on_robot_failed(step, &reason, now),
             Input::Shutdown { reason } => {
                 if self.session_running() {
                     self.end_session(SessionEnd::NodeShutdown, &reason, now);
@@ -279,6 +290,68 @@ impl GameManager {
 
     fn log(&mut self, level: LogLevel, message: String) {
         self.out.push(Output::Log { level, message });
+    }
+
+    /// What follows the robot acts just put out: at `estimate_ns` (`topics` backend), or when
+    /// the robot says it has finished them (`qtrobot`).
+    fn after_robot(&mut self, then: Timer, estimate_ns: i64) {
+        if self.robot_waits {
+            let step = self.next_robot_step;
+            self.next_robot_step += 1;
+            self.robot_step = Some((step, then));
+            self.out.push(Output::AwaitRobot { step });
+        } else {
+            self.set_timer(then, estimate_ns);
+        }
+    }
+
+    /// The robot finished step `step`: what was waiting for it goes on (an old step, one a
+    /// pause or stop left behind, changes nothing).
+    fn on_robot_done(&mut self, step: u64, now: i64) {
+        let Some((current, then)) = self.robot_step else {
+            return;
+        };
+        if current != step {
+            return;
+        }
+        self.robot_step = None;
+        self.on_timer(then, now);
+    }
+
+    /// The robot did not finish step `step`: the session pauses with the reason, and the
+    /// therapist's resume goes on from where it stopped (a feedback line or a sequence is said
+    /// again from its start; an introduction or reaction is not repeated).
+    fn on_robot_failed(&mut self, step: u64, reason: &str, now: i64) {
+        let Some((current, then)) = self.robot_step else {
+            return;
+        };
+        if current != step {
+            return;
+        }
+        self.robot_step = None;
+        if then == Timer::SpeechDone {
+            self.current.speech_done = true;
+        }
+        let paused = match self.session.as_mut() {
+            Some(s) if self.phase != Phase::Idle && !matches!(self.phase, Phase::Ended(_)) => {
+                s.paused_since.get_or_insert(now);
+                true
+            }
+            _ => false,
+        };
+        if paused {
+            self.suspend(now);
+            self.out.push(Output::LiveLine(format!(
+                "!! the robot did not finish ({reason}): session paused; resume to go on"
+            )));
+            self.status = format!("the robot did not finish ({reason}): paused, resume to go on");
+            self.publish_state(now);
+        } else {
+            self.log(
+                LogLevel::WARN,
+                format!("the robot did not finish ({reason})"),
+            );
+        }
     }
 
     fn act(&mut self, act: RobotAct) {

@@ -166,7 +166,7 @@ impl GameManager {
             let act = self.utterances.reaction(correct, false);
             self.act(act);
             let at = now + self.scaled_ns(self.params.reaction_time_s);
-            self.set_timer(Timer::SpeechDone, at);
+            self.after_robot(Timer::SpeechDone, at);
         }
         self.request_decision(now);
     }
@@ -192,6 +192,7 @@ impl GameManager {
             self.act(act);
         }
         self.timers.clear();
+        self.robot_step = None;
         self.current = Current::default();
         let Some(s) = self.session.as_mut() else {
             return;

@@ -53,7 +53,7 @@ impl GameManager {
             self.act(act);
         }
         let at = now + self.scaled_ns(self.params.feedback_time_s);
-        self.set_timer(Timer::FeedbackDone, at);
+        self.after_robot(Timer::FeedbackDone, at);
     }
 
     fn start_words(&mut self, now: i64) {
@@ -83,10 +83,10 @@ impl GameManager {
         let t0 = self.current.words_started_ns;
         let slot_middle = |k: i64| t0 + per * k + per / 2;
         if i + 1 < n {
-            self.set_timer(Timer::Word(i + 1), slot_middle(i as i64 + 1));
+            self.after_robot(Timer::Word(i + 1), slot_middle(i as i64 + 1));
         } else {
             let total = self.scaled_ns(self.params.speaking_time_s(n));
-            self.set_timer(Timer::SequenceSaid, (t0 + total).max(slot_middle(i as i64)));
+            self.after_robot(Timer::SequenceSaid, (t0 + total).max(slot_middle(i as i64)));
         }
     }
 

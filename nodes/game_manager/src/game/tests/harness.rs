@@ -58,6 +58,8 @@ pub struct Harness {
     pub child: Child,
     heard: Vec<Emotion>,
     saying: bool,
+    /// How the robot answers a step (`qtrobot` backend).
+    pub robot: Box<dyn FnMut(u64) -> RobotReply>,
 }
 
 /// A fixed rule in place of the learned policy: level 1 first; up a level after a success,
@@ -139,6 +141,12 @@ pub fn override_to(level: u8, session: &str, id: u64) -> Input {
     Input::Command(c)
 }
 
+/// How the simulated robot answers a step of calls.
+pub enum RobotReply {
+    Done { after_s: f64 },
+    Fail { after_s: f64, reason: String },
+}
+
 impl Harness {
     pub fn new(params: GameManagerParams, policy: Policy, child: Child) -> Self {
         let mut gm = GameManager::new(params).expect("valid parameters");
@@ -176,6 +184,7 @@ impl Harness {
             child,
             heard: Vec::new(),
             saying: false,
+            robot: Box::new(|_| RobotReply::Done { after_s: 0.5 }),
         };
         h.absorb(initial);
         h
@@ -266,6 +275,18 @@ impl Harness {
     fn absorb(&mut self, out: Vec<Output>) {
         for o in out {
             match &o {
+                Output::AwaitRobot { step } => match (self.robot)(*step) {
+                    RobotReply::Done { after_s } => {
+                        self.at(self.now + ns(after_s), Input::RobotDone { step: *step })
+                    }
+                    RobotReply::Fail { after_s, reason } => self.at(
+                        self.now + ns(after_s),
+                        Input::RobotFailed {
+                            step: *step,
+                            reason,
+                        },
+                    ),
+                },
                 Output::SetTimer { id, at_ns } => {
                     self.at(*at_ns, Input::TimerFired { id: *id });
                 }

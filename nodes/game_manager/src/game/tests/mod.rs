@@ -5,4 +5,5 @@ mod commands;
 mod harness;
 mod heartbeats;
 mod recovery;
+mod robot;
 mod session;
