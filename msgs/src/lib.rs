@@ -9,6 +9,7 @@ pub mod live_line;
 pub mod messages;
 pub mod phases;
 pub mod qt_robot_interface;
+pub mod qtrobot_interfaces;
 pub mod results;
 pub mod sequence_engagement;
 pub mod services;

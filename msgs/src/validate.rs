@@ -377,7 +377,15 @@ valid_as_is!(
     crate::qt_robot_interface::SpeechStopResponse,
     crate::qt_robot_interface::EmotionShowRequest,
     crate::qt_robot_interface::EmotionShowResponse,
-    crate::qt_robot_interface::GesturePlayResponse
+    crate::qt_robot_interface::GesturePlayResponse,
+    crate::qtrobot_interfaces::TtsEngineSayTextRequest,
+    crate::qtrobot_interfaces::TtsEngineSayTextResponse,
+    crate::qtrobot_interfaces::TtsEngineCancelRequest,
+    crate::qtrobot_interfaces::TtsEngineCancelResponse,
+    crate::qtrobot_interfaces::FaceEmotionShowRequest,
+    crate::qtrobot_interfaces::FaceEmotionShowResponse,
+    crate::qtrobot_interfaces::GestureFilePlayRequest,
+    crate::qtrobot_interfaces::GestureFilePlayResponse
 );
 
 impl Validate for crate::qt_robot_interface::GesturePlayRequest {

@@ -191,6 +191,41 @@ fn every_message_file_matches_its_rust_type() {
         use qt_robot_interface::*;
         robot_srv!(SpeechSay, SpeechStop, EmotionShow, GesturePlay);
     }
+    // QTrobot V3's, against their restatement.
+    for (text, request, response) in [
+        (
+            read("../interfaces/qtrobot_interfaces/srv/TtsEngineSayText.srv"),
+            <qtrobot_interfaces::TtsEngineSayTextRequest as MessageDefinition>::fields
+                as fn() -> Vec<Field>,
+            <qtrobot_interfaces::TtsEngineSayTextResponse as MessageDefinition>::fields
+                as fn() -> Vec<Field>,
+        ),
+        (
+            read("../interfaces/qtrobot_interfaces/srv/TtsEngineCancel.srv"),
+            <qtrobot_interfaces::TtsEngineCancelRequest as MessageDefinition>::fields,
+            <qtrobot_interfaces::TtsEngineCancelResponse as MessageDefinition>::fields,
+        ),
+        (
+            read("../interfaces/qtrobot_interfaces/srv/FaceEmotionShow.srv"),
+            <qtrobot_interfaces::FaceEmotionShowRequest as MessageDefinition>::fields,
+            <qtrobot_interfaces::FaceEmotionShowResponse as MessageDefinition>::fields,
+        ),
+        (
+            read("../interfaces/qtrobot_interfaces/srv/GestureFilePlay.srv"),
+            <qtrobot_interfaces::GestureFilePlayRequest as MessageDefinition>::fields,
+            <qtrobot_interfaces::GestureFilePlayResponse as MessageDefinition>::fields,
+        ),
+    ] {
+        let (req, resp) = text.split_once("---\n").expect("a .srv has a --- line");
+        for (half, fields) in [(req, request), (resp, response)] {
+            let file: Vec<(String, String)> = parse_definition(half).fields;
+            let rust: Vec<(String, String)> = fields()
+                .into_iter()
+                .map(|f| (f.name.to_string(), f.ros_type))
+                .collect();
+            assert_eq!(rust, file);
+        }
+    }
 
     // And the CMakeLists lists every one of them for rosidl.
     let cmake = read("CMakeLists.txt");

@@ -38,6 +38,11 @@ struct Cli {
     /// would after the robot failed.
     #[arg(long)]
     resume_paused: bool,
+    /// Press the emergency stop while the robot says this sequence (by index), as its second
+    /// face shows (so mid-word); the run then ends at the emergency-stopped state rather than
+    /// at the end of the session.
+    #[arg(long)]
+    emergency_stop_at: Option<u8>,
     #[command(flatten)]
     shell: ShellOptions,
 }
@@ -185,6 +190,9 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
     let (answer_tx, mut due_answers) = tokio::sync::mpsc::channel::<TabletAnswer>(16);
     let mut shown: Vec<String> = Vec::new();
     let mut overridden = false;
+    let mut emergency_sent = false;
+    // Faces seen of the sequence the emergency stop is pressed in.
+    let mut emergency_faces: Option<u8> = None;
     let mut next_command_id = 10;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     let deadline = tokio::time::sleep(Duration::from_secs(cli.timeout_s));
@@ -233,7 +241,14 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                     emit(serde_json::json!({"event": "resuming", "status": s.status}));
                     commands.send(c);
                 }
-                if s.phase == GameState::FINISHED {
+                if cli.emergency_stop_at == Some(s.sequence_index)
+                    && s.phase == GameState::SAYING_SEQUENCE
+                {
+                    emergency_faces = Some(0);
+                }
+                let ended = s.phase == GameState::FINISHED
+                    || (emergency_sent && s.phase == GameState::EMERGENCY_STOPPED);
+                if ended {
                     let grace = tokio::time::sleep(qt_therapy_msgs::live_line::LAST_RESULT_GRACE);
                     tokio::pin!(grace);
                     loop {
@@ -242,11 +257,22 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                             Some(r) = results.recv() => emit(result_event(&r)),
                         }
                     }
-                    emit(serde_json::json!({"event": "done"}));
+                    emit(serde_json::json!({"event": "done", "phase": s.phase}));
                     return Ok(0);
                 }
             }
-            Some(e) = emotions.recv() => shown.push(e.data.trim_start_matches("QT/").to_string()),
+            Some(e) = emotions.recv() => {
+                shown.push(e.data.trim_start_matches("QT/").to_string());
+                if let Some(faces) = emergency_faces.as_mut() && !emergency_sent {
+                    *faces += 1;
+                    if *faces == 2 {
+                        emit(serde_json::json!({"event": "emergency_stop", "at_ns": now_nanos()}));
+                        commands.send(command(TherapistCommand::EMERGENCY_STOP, &cli.session, next_command_id));
+                        next_command_id += 1;
+                        emergency_sent = true;
+                    }
+                }
+            }
             Some(s) = speech.recv() => emit(serde_json::json!({"event": "speech", "data": s.data})),
             Some(t) = tasks.recv() => {
                 if t.session_id != cli.session || cli.silent.contains(&t.sequence_index) {

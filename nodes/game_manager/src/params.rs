@@ -77,13 +77,14 @@ pub struct GameManagerParams {
     /// goes on at the therapist's resume; older ones are left as they are. 0: never.
     pub recovery_max_age_s: f64,
     /// How the robot is driven: `topics` (QTrobot's std_msgs/String topics; the game waits
-    /// the estimated speaking times) or `qtrobot` (its services, each returning when the
-    /// robot has finished: the game waits for them).
+    /// the estimated speaking times), `qtrobot` (QTrobot V2's services through ros1_bridge)
+    /// or `qtrobot_ros2` (QTrobot V3's ROS 2 gateway): each service returns when the robot
+    /// has finished, and the game waits for them.
     pub robot_backend: String,
-    /// `qtrobot`: a call not answered within this many seconds (real time) fails; the
+    /// `qtrobot`, `qtrobot_ros2`: a call not answered within this many seconds (real time) fails; the
     /// session is then paused with the reason.
     pub robot_call_timeout_s: f64,
-    /// `qtrobot`: the gesture speed factor sent with every gesture.
+    /// `qtrobot`, `qtrobot_ros2`: the gesture speed factor sent with every gesture.
     pub robot_gesture_speed: f64,
 }
 
@@ -91,7 +92,18 @@ pub struct GameManagerParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RobotBackend {
     Topics,
+    /// QTrobot V2 (ROS 1 `qt_robot_interface`, reached through ros1_bridge).
     QtRobot,
+    /// QTrobot V3 (LuxAI's ROS 2 gateway, `qtrobot_interfaces`).
+    QtRobotRos2,
+}
+
+impl RobotBackend {
+    /// Whether the robot answers when it has finished (services), so the game waits for it
+    /// rather than for estimated speaking times.
+    pub fn answers_when_done(self) -> bool {
+        self != RobotBackend::Topics
+    }
 }
 
 fn strings(v: &[&str]) -> Vec<String> {
@@ -309,9 +321,10 @@ impl GameManagerParams {
         match self.robot_backend.as_str() {
             "topics" => Ok(RobotBackend::Topics),
             "qtrobot" => Ok(RobotBackend::QtRobot),
+            "qtrobot_ros2" => Ok(RobotBackend::QtRobotRos2),
             other => Err(ParamError {
                 key: "robot_backend",
-                reason: format!("{other:?} is not topics or qtrobot"),
+                reason: format!("{other:?} is not topics, qtrobot or qtrobot_ros2"),
             }),
         }
     }

@@ -1,15 +1,18 @@
 //! The robot side of the game manager's DDS shell: the core's robot acts go to QTrobot's
-//! std_msgs/String topics (`robot_backend: topics`) or to its services (`qtrobot`), where the
-//! calls of one step run together and the step is answered with `Input::RobotDone` once every
-//! call returned (or `Input::RobotFailed` with the reason: an error, a `false` status, no
-//! answer within `robot_call_timeout_s`).
+//! std_msgs/String topics (`robot_backend: topics`) or to its services (`qtrobot`: V2's
+//! qt_robot_interface; `qtrobot_ros2`: V3's gateway), where the calls of one step run together
+//! and the step is answered with `Input::RobotDone` once every call returned (or
+//! `Input::RobotFailed` with the reason: an error, a `false` status, no answer within
+//! `robot_call_timeout_s`).
 
+use game_manager::params::RobotBackend;
 use game_manager::{GameManagerParams, Input};
 use node_shell::{NodeShell, Outbox, ServiceClient};
 use qt_therapy_msgs::qt_robot_interface::{
     EMOTION_SHOW, EmotionShow, EmotionShowRequest, GESTURE_PLAY, GesturePlay, GesturePlayRequest,
     SPEECH_SAY, SPEECH_STOP, SpeechSay, SpeechSayRequest, SpeechStop, SpeechStopRequest,
 };
+use qt_therapy_msgs::qtrobot_interfaces as v3;
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH};
 use std::time::Duration;
@@ -35,16 +38,31 @@ pub enum Robot {
         emotion: Outbox<StringMsg>,
         gesture: Outbox<StringMsg>,
     },
-    QtRobot {
-        say: ServiceClient<SpeechSay>,
-        stop: ServiceClient<SpeechStop>,
-        emotion: ServiceClient<EmotionShow>,
-        gesture: ServiceClient<GesturePlay>,
+    Services {
+        services: RobotServices,
         timeout: Duration,
         gesture_speed: f32,
         /// The calls of the step being put out.
         calls: Vec<Call>,
         inputs: mpsc::Sender<Input>,
+    },
+}
+
+/// QTrobot's services, by robot generation.
+pub enum RobotServices {
+    /// V2: qt_robot_interface (ROS 1, through ros1_bridge).
+    V2 {
+        say: ServiceClient<SpeechSay>,
+        stop: ServiceClient<SpeechStop>,
+        emotion: ServiceClient<EmotionShow>,
+        gesture: ServiceClient<GesturePlay>,
+    },
+    /// V3: LuxAI's ROS 2 gateway.
+    V3 {
+        say: ServiceClient<v3::TtsEngineSayText>,
+        cancel: ServiceClient<v3::TtsEngineCancel>,
+        emotion: ServiceClient<v3::FaceEmotionShow>,
+        gesture: ServiceClient<v3::GestureFilePlay>,
     },
 }
 
@@ -54,37 +72,60 @@ impl Robot {
         params: &GameManagerParams,
         inputs: mpsc::Sender<Input>,
     ) -> anyhow::Result<Robot> {
-        Ok(match params.robot_backend()? {
-            game_manager::params::RobotBackend::Topics => Robot::Topics {
-                speech: shell.publisher(ROBOT_SPEECH)?,
-                emotion: shell.publisher(ROBOT_EMOTION)?,
-                gesture: shell.publisher(ROBOT_GESTURE)?,
-            },
-            game_manager::params::RobotBackend::QtRobot => Robot::QtRobot {
+        let services = match params.robot_backend()? {
+            RobotBackend::Topics => {
+                return Ok(Robot::Topics {
+                    speech: shell.publisher(ROBOT_SPEECH)?,
+                    emotion: shell.publisher(ROBOT_EMOTION)?,
+                    gesture: shell.publisher(ROBOT_GESTURE)?,
+                });
+            }
+            RobotBackend::QtRobot => RobotServices::V2 {
                 say: shell.client(SPEECH_SAY)?,
                 stop: shell.client(SPEECH_STOP)?,
                 emotion: shell.client(EMOTION_SHOW)?,
                 gesture: shell.client(GESTURE_PLAY)?,
-                timeout: Duration::from_secs_f64(params.robot_call_timeout_s),
-                gesture_speed: params.robot_gesture_speed as f32,
-                calls: Vec::new(),
-                inputs,
             },
+            RobotBackend::QtRobotRos2 => RobotServices::V3 {
+                say: shell.client(v3::SAY_TEXT)?,
+                cancel: shell.client(v3::TTS_CANCEL)?,
+                emotion: shell.client(v3::EMOTION_SHOW)?,
+                gesture: shell.client(v3::GESTURE_FILE_PLAY)?,
+            },
+        };
+        Ok(Robot::Services {
+            services,
+            timeout: Duration::from_secs_f64(params.robot_call_timeout_s),
+            gesture_speed: params.robot_gesture_speed as f32,
+            calls: Vec::new(),
+            inputs,
         })
     }
 
     /// Whether QTrobot's services answer (logged at start-up; calls fail later if not).
     pub async fn check(&self, shell: &NodeShell, wait: Duration) {
-        if let Robot::QtRobot { say, .. } = self {
-            if shell.wait_for_service(say, wait).await {
-                tracing::info!("QTrobot's services reachable ({})", SPEECH_SAY.name);
-            } else {
-                tracing::warn!(
-                    "no {} server within {wait:?}: sessions pause at the robot's first act \
-                     until QTrobot's services answer (ros1_bridge running?)",
-                    SPEECH_SAY.name
-                );
-            }
+        let Robot::Services { services, .. } = self else {
+            return;
+        };
+        let (reachable, name, hint) = match services {
+            RobotServices::V2 { say, .. } => (
+                shell.wait_for_service(say, wait).await,
+                SPEECH_SAY.name,
+                "ros1_bridge running?",
+            ),
+            RobotServices::V3 { say, .. } => (
+                shell.wait_for_service(say, wait).await,
+                v3::SAY_TEXT.name,
+                "LuxAI's gateway running: python -m gateway.qtrobot_ros2?",
+            ),
+        };
+        if reachable {
+            tracing::info!("QTrobot's services reachable ({name})");
+        } else {
+            tracing::warn!(
+                "no {name} server within {wait:?}: sessions pause at the robot's first act \
+                 until QTrobot's services answer ({hint})"
+            );
         }
     }
 
@@ -102,43 +143,19 @@ impl Robot {
                 };
                 outbox.send(StringMsg { data });
             }
-            Robot::QtRobot {
-                say,
-                stop,
-                emotion,
-                gesture,
+            Robot::Services {
+                services,
                 timeout,
                 gesture_speed,
                 calls,
                 ..
-            } => {
-                let timeout = *timeout;
-                let call: Call = match act {
-                    Act::Say(message) if message.is_empty() => {
-                        spawn_call(stop, SpeechStopRequest::default(), timeout, |r| r.status)
-                    }
-                    Act::Say(message) => {
-                        spawn_call(say, SpeechSayRequest { message }, timeout, |r| r.status)
-                    }
-                    Act::Emotion(name) => {
-                        spawn_call(emotion, EmotionShowRequest { name }, timeout, |r| r.status)
-                    }
-                    Act::Gesture(name) => {
-                        let request = GesturePlayRequest {
-                            name,
-                            speed: *gesture_speed,
-                        };
-                        spawn_call(gesture, request, timeout, |r| r.status)
-                    }
-                };
-                calls.push(call);
-            }
+            } => calls.push(services.call(act, *timeout, *gesture_speed)),
         }
     }
 
     /// The calls put out since the last step are step `step`: answered when all returned.
     pub fn await_step(&mut self, step: u64) {
-        let Robot::QtRobot { calls, inputs, .. } = self else {
+        let Robot::Services { calls, inputs, .. } = self else {
             return;
         };
         let calls = std::mem::take(calls);
@@ -164,7 +181,7 @@ impl Robot {
     /// Calls no step waits for (the goodbye, the emergency stop's silence) go on by
     /// themselves; a failure is logged.
     pub fn detach(&mut self) {
-        let Robot::QtRobot { calls, .. } = self else {
+        let Robot::Services { calls, .. } = self else {
             return;
         };
         for call in calls.drain(..) {
@@ -173,6 +190,72 @@ impl Robot {
                     tracing::warn!("a robot call failed: {reason}");
                 }
             });
+        }
+    }
+}
+
+impl RobotServices {
+    /// Puts `act` out as the service call it is on this robot.
+    fn call(&self, act: Act, timeout: Duration, gesture_speed: f32) -> Call {
+        match self {
+            RobotServices::V2 {
+                say,
+                stop,
+                emotion,
+                gesture,
+            } => match act {
+                Act::Say(message) if message.is_empty() => {
+                    spawn_call(stop, SpeechStopRequest::default(), timeout, |r| r.status)
+                }
+                Act::Say(message) => {
+                    spawn_call(say, SpeechSayRequest { message }, timeout, |r| r.status)
+                }
+                Act::Emotion(name) => {
+                    spawn_call(emotion, EmotionShowRequest { name }, timeout, |r| r.status)
+                }
+                Act::Gesture(name) => {
+                    let request = GesturePlayRequest {
+                        name,
+                        speed: gesture_speed,
+                    };
+                    spawn_call(gesture, request, timeout, |r| r.status)
+                }
+            },
+            // The gateway answers `status` (the call reached the robot) and `result` (what
+            // the robot said of it): both must be true.
+            RobotServices::V3 {
+                say,
+                cancel,
+                emotion,
+                gesture,
+            } => match act {
+                Act::Say(text) if text.is_empty() => {
+                    let request = v3::TtsEngineCancelRequest::default();
+                    spawn_call(cancel, request, timeout, |r| r.status && r.result)
+                }
+                Act::Say(text) => {
+                    // Empty fields and zeros leave the robot's own voice settings.
+                    let request = v3::TtsEngineSayTextRequest {
+                        text,
+                        ..Default::default()
+                    };
+                    spawn_call(say, request, timeout, |r| r.status && r.result)
+                }
+                Act::Emotion(emotion_name) => {
+                    let request = v3::FaceEmotionShowRequest {
+                        emotion: emotion_name,
+                        speed: 0.0,
+                    };
+                    spawn_call(emotion, request, timeout, |r| r.status && r.result)
+                }
+                Act::Gesture(name) => {
+                    let request = v3::GestureFilePlayRequest {
+                        gesture: name,
+                        speed_factor: gesture_speed,
+                    };
+                    spawn_call(gesture, request, timeout, |r| r.status && r.result)
+                }
+            },
         }
     }
 }
@@ -192,7 +275,7 @@ where
     tokio::spawn(async move {
         match client.call(request, timeout).await {
             Ok(response) if status(&response) => Ok(()),
-            Ok(_) => Err(format!("{} answered status false", client.name())),
+            Ok(_) => Err(format!("{} answered that it failed", client.name())),
             Err(e) => Err(e.to_string()),
         }
     })

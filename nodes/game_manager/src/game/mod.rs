@@ -179,7 +179,7 @@ struct CommandAnswer {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
-        let robot_waits = params.robot_backend()? == crate::params::RobotBackend::QtRobot;
+        let robot_waits = params.robot_backend()?.answers_when_done();
         let watched = HeartbeatWatch::with_timeout_s(
             params.watched_nodes.iter().cloned(),
             params.node_loss_timeout_s,

@@ -73,7 +73,7 @@ fn a_step_the_robot_does_not_finish_pauses_the_session_and_resume_says_it_again(
         if step == 3 {
             RobotReply::Fail {
                 after_s: 0.4,
-                reason: "/qt_robot/speech/say answered status false".into(),
+                reason: "/qt_robot/speech/say answered that it failed".into(),
             }
         } else {
             RobotReply::Done { after_s: 0.6 }
@@ -84,7 +84,7 @@ fn a_step_the_robot_does_not_finish_pauses_the_session_and_resume_says_it_again(
     let paused = h.last_state();
     assert!(
         paused.status.contains("the robot did not finish")
-            && paused.status.contains("status false"),
+            && paused.status.contains("answered that it failed"),
         "{}",
         paused.status
     );
