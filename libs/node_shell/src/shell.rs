@@ -19,7 +19,7 @@ use ros2_client::{
 };
 use serde::de::DeserializeOwned;
 use std::net::{IpAddr, Ipv4Addr};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -27,7 +27,8 @@ use tokio::sync::{mpsc, oneshot, watch};
 /// Command-line options every node accepts (flatten into the node's clap struct).
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct ShellOptions {
-    /// ROS 2 parameter file [default: $QT_PARAMS_DIR/<node>.yaml, else params/<node>.yaml]
+    /// ROS 2 parameter file [default: $QT_PARAMS_DIR/<node>.yaml, else params/<node>.yaml,
+    /// else /etc/qt-therapy/<node>.yaml where the package installed it]
     #[arg(long)]
     pub params_file: Option<PathBuf>,
     /// Node name on the ROS graph; also the section read from the parameter file.
@@ -61,10 +62,11 @@ impl ShellOptions {
         if let Some(p) = &self.params_file {
             return p.clone();
         }
-        match std::env::var_os("QT_PARAMS_DIR") {
-            Some(dir) => PathBuf::from(dir).join(format!("{node_name}.yaml")),
-            None => PathBuf::from("params").join(format!("{node_name}.yaml")),
-        }
+        let dir = params_dir(
+            std::env::var_os("QT_PARAMS_DIR").filter(|d| !d.is_empty()),
+            |d| d.is_dir(),
+        );
+        dir.join(format!("{node_name}.yaml"))
     }
 
     /// The node's name: `--node-name`, else `default_name`.
@@ -88,6 +90,23 @@ impl ShellOptions {
         let params = parameters_from_map(map, &path, &name)?;
         Ok((params, path))
     }
+}
+
+/// Where the qt-therapy package installs the parameter files (conffiles).
+pub const INSTALLED_PARAMS_DIR: &str = "/etc/qt-therapy";
+
+/// The directory the parameter files are read from: `QT_PARAMS_DIR`, else `params/` (in the
+/// workspace), else the package's `/etc/qt-therapy` when it is there, so an installed program
+/// started from anywhere finds its files; else `params/`, which the error then names.
+fn params_dir(env: Option<std::ffi::OsString>, is_dir: impl Fn(&Path) -> bool) -> PathBuf {
+    if let Some(dir) = env {
+        return PathBuf::from(dir);
+    }
+    let workspace = Path::new("params");
+    if !is_dir(workspace) && is_dir(Path::new(INSTALLED_PARAMS_DIR)) {
+        return PathBuf::from(INSTALLED_PARAMS_DIR);
+    }
+    workspace.to_path_buf()
 }
 
 /// ROS_DOMAIN_ID, 0 when unset; values outside 0..=232 are an error.
@@ -718,12 +737,31 @@ where
 
 #[cfg(test)]
 mod tests {
-    use super::{domain_id_from, localhost_only_from};
+    use super::{INSTALLED_PARAMS_DIR, domain_id_from, localhost_only_from, params_dir};
     use std::future::Future;
     use std::pin::Pin;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::{Duration, Instant};
+
+    #[test]
+    fn parameter_files_come_from_the_env_then_the_workspace_then_the_package() {
+        use std::path::{Path, PathBuf};
+        let only =
+            |dirs: &'static [&'static str]| move |d: &Path| dirs.iter().any(|x| d == Path::new(x));
+        let env = Some(std::ffi::OsString::from("/tmp/p"));
+        assert_eq!(params_dir(env, only(&["params"])), PathBuf::from("/tmp/p"));
+        assert_eq!(
+            params_dir(None, only(&["params", INSTALLED_PARAMS_DIR])),
+            PathBuf::from("params")
+        );
+        assert_eq!(
+            params_dir(None, only(&[INSTALLED_PARAMS_DIR])),
+            PathBuf::from(INSTALLED_PARAMS_DIR)
+        );
+        // Neither: the workspace's, so the error names the file a developer expects.
+        assert_eq!(params_dir(None, only(&[])), PathBuf::from("params"));
+    }
 
     #[test]
     fn ros_domain_id_is_read_as_ros_2_does_and_nonsense_is_named() {

@@ -314,6 +314,22 @@ fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The newest `session.mcap` among the run directories under `sessions_root` (as the
+/// installed service writes them: `<root>/<run>/session.mcap`), by modification time; None
+/// when there is none.
+pub fn last_bag(sessions_root: &std::path::Path) -> Option<std::path::PathBuf> {
+    std::fs::read_dir(sessions_root)
+        .ok()?
+        .filter_map(Result::ok)
+        .map(|run| run.path().join("session.mcap"))
+        .filter_map(|bag| {
+            let modified = bag.metadata().ok()?.modified().ok()?;
+            Some((modified, bag))
+        })
+        .max()
+        .map(|(_, bag)| bag)
+}
+
 /// The whole report as one HTML page (figures inline, no external resources).
 pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
     let s = log.summary()?;
@@ -441,6 +457,28 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_last_bag_is_the_newest_runs() {
+        let root = tempfile::tempdir().expect("temp dir");
+        assert_eq!(super::last_bag(root.path()), None);
+        assert_eq!(super::last_bag(&root.path().join("absent")), None);
+        let at = |run: &str, secs: u64| {
+            let dir = root.path().join(run);
+            std::fs::create_dir_all(&dir).expect("run dir");
+            let bag = dir.join("session.mcap");
+            let file = std::fs::File::create(&bag).expect("bag");
+            file.set_modified(std::time::UNIX_EPOCH + std::time::Duration::from_secs(secs))
+                .expect("mtime");
+            bag
+        };
+        at("20261201-090000", 1_000);
+        let newest = at("20261203-100000", 3_000);
+        at("20261202-110000", 2_000);
+        // A run without a bag (started, refused) is passed over.
+        std::fs::create_dir_all(root.path().join("20261204-120000")).expect("dir");
+        assert_eq!(super::last_bag(root.path()), Some(newest));
+    }
+
     use super::*;
     use qt_therapy_msgs::BehaviourState;
     use qt_therapy_msgs::builtin_interfaces::Time;

@@ -1,17 +1,27 @@
 //! `session_report`: a recorded session (MCAP bag) → one HTML page with its figures.
 //!   session_report out/session/session.mcap --output out/session/report.html
+//!   qt-therapy-report          (installed: the last run's bag under /var/lib/qt-therapy/sessions)
 
 use anyhow::Context;
 use clap::Parser;
-use session_report::{SessionLog, report_html};
-use std::path::PathBuf;
+use session_report::{SessionLog, last_bag, report_html};
+use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
 #[command(about = "Write the HTML report of a session recorded in a bag")]
 struct Cli {
-    /// The bag (.mcap) the session was recorded in.
-    bag: PathBuf,
-    /// Where to write the report [default: report.html beside the bag].
+    /// The bag (.mcap) the session was recorded in [default: the newest `session.mcap` in
+    /// the runs under --sessions-root].
+    bag: Option<PathBuf>,
+    /// Where the installed service records its runs (one directory each).
+    #[arg(
+        long,
+        env = "QT_THERAPY_SESSIONS",
+        default_value = "/var/lib/qt-therapy/sessions"
+    )]
+    sessions_root: PathBuf,
+    /// Where to write the report [default: report.html beside the bag, or
+    /// report-<run>.html here when that directory is not writable].
     #[arg(long)]
     output: Option<PathBuf>,
     /// Which session, if the bag holds several [default: the last one].
@@ -21,20 +31,55 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    let reader = bag_file::BagReader::open(&cli.bag)
-        .with_context(|| format!("reading {}", cli.bag.display()))?;
+    let bag = match &cli.bag {
+        Some(bag) => bag.clone(),
+        None => {
+            let bag = last_bag(&cli.sessions_root).with_context(|| {
+                format!(
+                    "no bag given, and none found under {} (--sessions-root)",
+                    cli.sessions_root.display()
+                )
+            })?;
+            println!("the last recorded run: {}", bag.display());
+            bag
+        }
+    };
+    let reader =
+        bag_file::BagReader::open(&bag).with_context(|| format!("reading {}", bag.display()))?;
     if let Some(damage) = reader.damage() {
         eprintln!("warning: {damage}; reporting what was recorded before it");
     }
     let log = SessionLog::from_bag(&reader, cli.session.as_deref())
-        .with_context(|| format!("decoding {}", cli.bag.display()))?;
+        .with_context(|| format!("decoding {}", bag.display()))?;
     let html =
-        report_html(&log).with_context(|| format!("making the report of {}", cli.bag.display()))?;
-    let output = cli
-        .output
-        .unwrap_or_else(|| cli.bag.with_file_name("report.html"));
-    atomic_file::write(&output, html.as_bytes())
-        .with_context(|| format!("writing {}", output.display()))?;
+        report_html(&log).with_context(|| format!("making the report of {}", bag.display()))?;
+    let output = match cli.output {
+        Some(output) => write(&output, &html)?,
+        None => {
+            let beside = bag.with_file_name("report.html");
+            match atomic_file::write(&beside, html.as_bytes()) {
+                Ok(()) => beside,
+                // The service's state is the service's to write; a therapist's account reads it.
+                Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+                    let run = bag
+                        .parent()
+                        .and_then(Path::file_name)
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_else(|| "session".into());
+                    let here = PathBuf::from(format!("report-{run}.html"));
+                    eprintln!(
+                        "{} is not writable here; the report goes to ./{}",
+                        beside.display(),
+                        here.display()
+                    );
+                    write(&here, &html)?
+                }
+                Err(e) => {
+                    return Err(e).with_context(|| format!("writing {}", beside.display()));
+                }
+            }
+        }
+    };
     let s = log.summary()?;
     println!(
         "session {}: {} sequences, score {} of {}, report {}",
@@ -45,4 +90,10 @@ fn main() -> anyhow::Result<()> {
         output.display()
     );
     Ok(())
+}
+
+fn write(output: &Path, html: &str) -> anyhow::Result<PathBuf> {
+    atomic_file::write(output, html.as_bytes())
+        .with_context(|| format!("writing {}", output.display()))?;
+    Ok(output.to_path_buf())
 }

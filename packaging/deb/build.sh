@@ -1,0 +1,148 @@
+#!/usr/bin/env bash
+# Builds the qt-therapy Debian package from this workspace with dpkg-deb (Debian's own tool,
+# kept with dpkg itself): the suite's eleven programs, its parameters as conffiles in
+# /etc/qt-therapy, models and launch files in /usr/share/qt-therapy, the systemd unit.
+#   bash packaging/deb/build.sh [--revision N] [--profile release|dev] [--out DIR]
+# Prints the path of the .deb. The layout and why: docs/install.md.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+
+revision=1
+profile=release
+out=${CARGO_TARGET_DIR:-target}/deb
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --revision) revision=$2; shift 2 ;;
+    --profile) profile=$2; shift 2 ;;
+    --out) out=$2; shift 2 ;;
+    *) echo "build.sh: unknown argument $1 (--revision N, --profile P, --out DIR)" >&2; exit 2 ;;
+  esac
+done
+out=$(realpath -m "$out")
+case "$revision" in '' | *[!0-9]*) echo "build.sh: --revision $revision is not a number" >&2; exit 2 ;; esac
+
+need_apt=()
+command -v dpkg-deb >/dev/null || need_apt+=(dpkg)
+command -v dpkg-shlibdeps >/dev/null || need_apt+=(dpkg-dev)
+command -v strip >/dev/null || need_apt+=(binutils)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
+  $SUDO apt-get update -qq && $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+
+# package -> the binary its crate builds -> its name in /usr/bin (qt-therapy-*, so nothing
+# another package installs can collide).
+programs=(
+  "engagement_classifier engagement_classifier engagement-classifier"
+  "user_model user_model user-model"
+  "behaviour_policy behaviour_policy behaviour-policy"
+  "game_manager game_manager game-manager"
+  "tablet_bridge tablet_bridge tablet-bridge"
+  "openface_bridge openface_bridge openface-bridge"
+  "simulated_child simulated_child simulated-child"
+  "therapist_console therapist therapist"
+  "bag bag bag"
+  "launcher launch launch"
+  "session_report session_report report"
+)
+packages=()
+for p in "${programs[@]}"; do
+  read -r crate _ _ <<<"$p"
+  packages+=(-p "$crate")
+done
+cargo build --profile "$profile" --bins "${packages[@]}"
+target=${CARGO_TARGET_DIR:-target}
+case "$profile" in dev) bin_dir=$target/debug ;; *) bin_dir=$target/$profile ;; esac
+
+version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
+arch=$(dpkg --print-architecture)
+name=qt-therapy_${version}-${revision}_${arch}
+root=$out/$name
+rm -rf "$root"
+mkdir -p "$root/DEBIAN" "$root/usr/bin" "$root/usr/lib/qt-therapy/bin" "$root/etc/qt-therapy" \
+  "$root/usr/share/qt-therapy/launch" "$root/usr/share/qt-therapy/models" \
+  "$root/usr/share/doc/qt-therapy" "$root/lib/systemd/system"
+
+for p in "${programs[@]}"; do
+  read -r _ bin public <<<"$p"
+  install -m 0755 "$bin_dir/$bin" "$root/usr/lib/qt-therapy/bin/$bin"
+  # Line tables are for developers' backtraces; symbol names stay.
+  strip --strip-debug "$root/usr/lib/qt-therapy/bin/$bin"
+  ln -s "../lib/qt-therapy/bin/$bin" "$root/usr/bin/qt-therapy-$public"
+done
+install -m 0755 packaging/deb/start "$root/usr/lib/qt-therapy/start"
+
+# Models, launch files, the unit.
+install -m 0644 -D -t "$root/usr/share/qt-therapy/models/user_model" nodes/user_model/models/*.json
+install -m 0644 -D -t "$root/usr/share/qt-therapy/models/engagement_classifier" \
+  nodes/engagement_classifier/models/*.json
+install -m 0644 launch_scripts/tablet_session.launch.yaml launch_scripts/simulated_session.launch.yaml \
+  "$root/usr/share/qt-therapy/launch/"
+install -m 0644 packaging/deb/qt-therapy.service "$root/lib/systemd/system/"
+
+# Parameters: the workspace's files with the installed paths. Every path a file names must be
+# one of these; a path left relative fails the build.
+for f in params/*.yaml; do
+  sed -e 's#"nodes/user_model/models/#"/usr/share/qt-therapy/models/user_model/#' \
+    -e 's#"nodes/engagement_classifier/models/#"/usr/share/qt-therapy/models/engagement_classifier/#' \
+    -e 's#q_table_dir: "out/q_tables"#q_table_dir: "/var/lib/qt-therapy/q_tables"#' \
+    -e 's#sessions_dir: "sessions"#sessions_dir: "/var/lib/qt-therapy/sessions"#' \
+    "$f" >"$root/etc/qt-therapy/$(basename "$f")"
+done
+# The tablets reach the bridge over the robot's network; the PIN comes from
+# /etc/qt-therapy/environment and has no default.
+sed -i -e 's#http_bind: "127.0.0.1:8080"#http_bind: "0.0.0.0:8080"#' \
+  -e 's#^\(\s*\)pin: "1234"#\1pin: ""  \# set QT_TABLET_PIN in /etc/qt-therapy/environment#' \
+  "$root/etc/qt-therapy/tablet_bridge.yaml"
+install -m 0640 packaging/deb/environment "$root/etc/qt-therapy/environment"
+if grep -nE '"(nodes|out|params|sessions)/|"1234"' "$root"/etc/qt-therapy/*.yaml; then
+  echo "build.sh: a parameter above still names a workspace path or the example PIN" >&2
+  exit 1
+fi
+for model in $(sed -n 's/.*_file: "\(\/[^"]*\)".*/\1/p' "$root"/etc/qt-therapy/*.yaml | sort -u); do
+  [ -f "$root$model" ] || { echo "build.sh: a parameter names $model, which is not packaged" >&2; exit 1; }
+done
+
+install -m 0644 docs/install.md "$root/usr/share/doc/qt-therapy/install.md"
+cat >"$root/usr/share/doc/qt-therapy/copyright" <<COPYRIGHT
+Format: https://www.debian.org/doc/packaging-manuals/copyright-format/1.0/
+Upstream-Name: qt-therapy
+
+Files: *
+License: $(sed -n '/^\[workspace.package\]/,/^\[/s/^license = "\(.*\)"/\1/p' Cargo.toml)
+COPYRIGHT
+
+# Maintainer scripts; every file under /etc is a conffile (an upgrade keeps local changes).
+install -m 0755 packaging/deb/postinst packaging/deb/prerm packaging/deb/postrm "$root/DEBIAN/"
+(cd "$root" && find etc -type f | sort | sed 's#^#/#') >"$root/DEBIAN/conffiles"
+
+# Shared libraries the programs link, as Debian's tools name them.
+shlibs_dir=$(mktemp -d)
+mkdir -p "$shlibs_dir/debian"
+printf 'Source: qt-therapy\n\nPackage: qt-therapy\nArchitecture: any\n' >"$shlibs_dir/debian/control"
+shlibs=$(cd "$shlibs_dir" && dpkg-shlibdeps -O "$root"/usr/lib/qt-therapy/bin/* 2>/dev/null |
+  sed -n 's/^shlibs:Depends=//p')
+rm -rf "$shlibs_dir"
+[ -n "$shlibs" ] || { echo "build.sh: dpkg-shlibdeps found no libraries" >&2; exit 1; }
+
+cat >"$root/DEBIAN/control" <<CONTROL
+Package: qt-therapy
+Version: ${version}-${revision}
+Architecture: ${arch}
+Maintainer: QTrobot therapy suite developers <qt-therapy@localhost>
+Installed-Size: $(du -sk --exclude=DEBIAN "$root" | cut -f1)
+Depends: ${shlibs}, adduser, init-system-helpers (>= 1.50), fonts-dejavu-core
+Section: science
+Priority: optional
+Description: QTrobot personalised-behaviour suite for robot-assisted therapy
+ ROS 2 nodes (over DDS, no ROS installation needed) that play an emotion-sequence
+ memorisation game with a child on QTrobot: an engagement classifier on OpenFace
+ features, user models, a Q-learning behaviour policy, the game manager, and the
+ child's and therapist's tablet pages. Runs as qt-therapy.service; its Q-tables and
+ recorded sessions stay in /var/lib/qt-therapy across upgrades.
+CONTROL
+(cd "$root" && find . -path ./DEBIAN -prune -o -type f -print | sed 's#^\./##' | sort |
+  xargs md5sum) >"$root/DEBIAN/md5sums"
+
+dpkg-deb --root-owner-group -Zxz --build "$root" "$out/$name.deb" >/dev/null
+echo "$out/$name.deb"

@@ -1,0 +1,141 @@
+#!/usr/bin/env bash
+# The qt-therapy package, end to end, on this Debian machine (as root; it installs, upgrades,
+# removes and purges the package here): its file list and conffiles, the unit, one simulated
+# session run by the installed start script as the qt-therapy user, the refusal without a PIN,
+# an upgrade and a removal that keep /var/lib/qt-therapy, and a purge that deletes it.
+#   bash tests/package/check.sh        QT_PACKAGE_PROFILE=dev reuses the debug build
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+repo=$(pwd)
+[ "$(id -u)" = 0 ] || { echo "check.sh: run as root (it installs the package)" >&2; exit 2; }
+profile=${QT_PACKAGE_PROFILE:-release}
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+state=/var/lib/qt-therapy
+fail() { echo "check.sh: FAILED: $*" >&2; exit 1; }
+step() { echo "== $*"; }
+export DEBIAN_FRONTEND=noninteractive
+
+command -v systemd-analyze >/dev/null || { apt-get update -qq && apt-get install -y -qq systemd >/dev/null; }
+# It purges at the end: never on a robot whose Q-tables it would delete.
+if dpkg -s qt-therapy >/dev/null 2>&1 || [ -d "$state" ]; then
+  if [ "${QT_PACKAGE_CHECK_PURGE:-}" != 1 ]; then
+    echo "check.sh: qt-therapy is installed here or $state exists; the check would purge it." >&2
+    echo "  Run it on a scratch machine, or set QT_PACKAGE_CHECK_PURGE=1 to purge first." >&2
+    exit 2
+  fi
+  step "a previous install: purged first (QT_PACKAGE_CHECK_PURGE=1)"
+  apt-get purge -y -qq qt-therapy >/dev/null 2>&1 || true
+  rm -rf "$state"
+fi
+
+step "build (profile $profile)"
+deb1=$(bash packaging/deb/build.sh --profile "$profile" --revision 1 --out "$work/r1" | tail -n 1)
+[ -f "$deb1" ] || fail "no package built"
+
+step "file list and conffiles"
+dpkg-deb -c "$deb1" | awk '{print $6}' | sed 's#^\./#/#; s#/$##' | grep -v '^/\?$' | sort >"$work/files"
+for f in /usr/lib/qt-therapy/start /lib/systemd/system/qt-therapy.service /etc/qt-therapy/environment \
+  /usr/share/qt-therapy/launch/tablet_session.launch.yaml \
+  /usr/share/qt-therapy/launch/simulated_session.launch.yaml \
+  /usr/share/qt-therapy/models/user_model/migrave_study_c2.json \
+  /usr/share/qt-therapy/models/engagement_classifier/synthetic_engagement.json \
+  /usr/share/doc/qt-therapy/install.md; do
+  grep -qx "$f" "$work/files" || fail "$f is not in the package"
+done
+for p in launch game-manager behaviour-policy user-model engagement-classifier tablet-bridge \
+  openface-bridge simulated-child therapist bag report; do
+  grep -qx "/usr/bin/qt-therapy-$p" "$work/files" || fail "/usr/bin/qt-therapy-$p is not in the package"
+done
+for y in params/*.yaml; do
+  grep -qx "/etc/qt-therapy/$(basename "$y")" "$work/files" || fail "$y is not packaged"
+done
+outside=$(grep -vE '^/(usr/bin/qt-therapy-[a-z-]+|usr/lib/qt-therapy|usr/share/qt-therapy|usr/share/doc/qt-therapy|etc/qt-therapy|lib/systemd/system/qt-therapy.service)(/|$)' "$work/files" |
+  grep -vxE '/usr|/usr/bin|/usr/lib|/usr/share|/usr/share/doc|/etc|/lib|/lib/systemd|/lib/systemd/system' || true)
+[ -z "$outside" ] || fail "files outside the package's places: $outside"
+dpkg-deb -e "$deb1" "$work/control"
+dpkg-deb -c "$deb1" | awk '$1 ~ /^-/ {print $6}' | sed 's#^\./#/#' | grep '^/etc/' | sort >"$work/etc_files"
+sort "$work/control/conffiles" | diff "$work/etc_files" - || fail "conffiles are not exactly the files under /etc"
+grep -q '^Depends:.*libc6' "$work/control/control" || fail "no libc6 dependency"
+
+step "install"
+apt-get install -y -qq "$deb1" >"$work/install.out" 2>&1 || { cat "$work/install.out"; fail "apt install"; }
+grep qt-therapy: "$work/install.out" || true
+grep -q "set the therapist page's PIN" "$work/install.out" || fail "the install did not say to set the PIN"
+getent passwd qt-therapy >/dev/null || fail "no qt-therapy user"
+[ "$(stat -c '%U:%G %a' "$state")" = "qt-therapy:qt-therapy 750" ] || fail "$state: $(stat -c '%U:%G %a' "$state")"
+[ "$(stat -c '%U:%G %a' /etc/qt-therapy/environment)" = "root:qt-therapy 640" ] ||
+  fail "environment: $(stat -c '%U:%G %a' /etc/qt-therapy/environment)"
+[ -L /etc/systemd/system/multi-user.target.wants/qt-therapy.service ] || fail "the service is not enabled"
+qt-therapy-launch --help >/dev/null || fail "qt-therapy-launch does not run"
+
+step "systemd-analyze verify"
+systemd-analyze verify /lib/systemd/system/qt-therapy.service 2>&1 | tee "$work/verify.out"
+if grep -v -e 'Failed to connect\|System has not been booted\|not supported' "$work/verify.out" | grep -q .; then
+  fail "systemd-analyze verify complained"
+fi
+
+# As systemd runs the service: its user, its environment file, its directory and umask.
+cat >"$work/run-service.sh" <<SERVICE
+cd $state
+umask 0027
+set -a
+. /etc/qt-therapy/environment
+set +a
+export STATE_DIRECTORY=$state
+exec $repo/tests/loopback-netns runuser -u qt-therapy -- /usr/lib/qt-therapy/start
+SERVICE
+run_service() { timeout 300 bash "$work/run-service.sh"; }
+
+step "no PIN: refused with the reason, exit 78"
+set +e
+run_service >"$work/refused.out" 2>&1
+rc=$?
+set -e
+[ "$rc" = 78 ] || { cat "$work/refused.out"; fail "exit $rc without a PIN, not 78"; }
+grep -q "no QT_TABLET_PIN" "$work/refused.out" || fail "the refusal does not name QT_TABLET_PIN"
+
+step "one simulated session by the installed start script"
+sed -i 's/^QT_TABLET_PIN=.*/QT_TABLET_PIN=8642/; s/^QT_THERAPY_LAUNCH=.*/QT_THERAPY_LAUNCH=simulated_session/' \
+  /etc/qt-therapy/environment
+run_service >"$work/session.out" 2>&1 ||
+  { tail -n 40 "$work/session.out"; fail "the simulated session did not end cleanly"; }
+run=$(ls -d "$state"/sessions/*/ | head -n 1)
+[ -s "$run/session.mcap" ] || fail "no bag in $run"
+[ "$(stat -c %U "$run/session.mcap")" = qt-therapy ] || fail "the bag is not the service user's"
+summary=$(ls "$run"/*.summary.json 2>/dev/null | head -n 1)
+[ -n "$summary" ] || fail "no session summary in $run"
+grep -q '"sequences_played": 10,' "$summary" || fail "the session did not play 10 sequences: $(cat "$summary")"
+ls "$run"/q_tables/cluster_*.json >/dev/null || fail "no Q-table learned in $run/q_tables"
+(cd /tmp && qt-therapy-report) >"$work/report.out" || fail "qt-therapy-report"
+grep -q "$run" "$work/report.out" && [ -s "$run/report.html" ] || fail "the report of the last run: $(cat "$work/report.out")"
+
+step "upgrade to revision 2 keeps the state and a changed conffile"
+# A Q-table as the robot would hold it, and a local change to a parameter file.
+cp "$run"/q_tables/cluster_0.json "$state/q_tables/cluster_0.json"
+chown qt-therapy:qt-therapy "$state/q_tables/cluster_0.json"
+echo "# changed on this robot" >>/etc/qt-therapy/game_manager.yaml
+sum_state() { (cd "$state" && find . -type f -print0 | sort -z | xargs -0 md5sum); }
+sum_state >"$work/state.before"
+deb2=$(bash packaging/deb/build.sh --profile "$profile" --revision 2 --out "$work/r2" | tail -n 1)
+apt-get install -y -qq "$deb2" >"$work/upgrade.out" 2>&1 || { cat "$work/upgrade.out"; fail "apt upgrade"; }
+dpkg-query -W -f '${Version}\n' qt-therapy | grep -q -- '-2$' || fail "revision 2 is not installed"
+sum_state | diff "$work/state.before" - || fail "the upgrade changed $state"
+grep -q "changed on this robot" /etc/qt-therapy/game_manager.yaml || fail "the upgrade dropped a local change"
+grep -q '^QT_TABLET_PIN=8642' /etc/qt-therapy/environment || fail "the upgrade dropped the PIN"
+
+step "remove keeps the state"
+apt-get remove -y -qq qt-therapy >"$work/remove.out" 2>&1 || { cat "$work/remove.out"; fail "apt remove"; }
+grep -q "kept in $state" "$work/remove.out" || fail "the removal did not say the state is kept"
+[ ! -e /usr/bin/qt-therapy-launch ] || fail "programs left after remove"
+sum_state | diff "$work/state.before" - || fail "the removal changed $state"
+getent passwd qt-therapy >/dev/null || fail "the removal deleted the user"
+
+step "purge deletes it, saying so"
+apt-get purge -y -qq qt-therapy >"$work/purge.out" 2>&1 || { cat "$work/purge.out"; fail "apt purge"; }
+grep -q "deleting $state" "$work/purge.out" || fail "the purge did not say what it deletes"
+[ ! -e "$state" ] || fail "$state left after purge"
+[ ! -e /etc/qt-therapy ] || fail "/etc/qt-therapy left after purge"
+! getent passwd qt-therapy >/dev/null || fail "the user left after purge"
+
+echo "package check: all passed"
