@@ -48,8 +48,19 @@ impl Guard {
 }
 
 impl Drop for Guard {
+    /// SIGINT first, so a launcher stops the nodes it started (a SIGKILLed launcher leaves
+    /// them running); SIGKILL after 10 s.
     fn drop(&mut self) {
         if let Ok(None) = self.child.try_wait() {
+            let pid = self.child.id().to_string();
+            let _ = Command::new("kill").args(["-INT", &pid]).status();
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(10) {
+                if let Ok(Some(_)) = self.child.try_wait() {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
             let _ = self.child.kill();
             let _ = self.child.wait();
         }
