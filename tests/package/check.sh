@@ -10,8 +10,18 @@ repo=$(pwd)
 [ "$(id -u)" = 0 ] || { echo "check.sh: run as root (it installs the package)" >&2; exit 2; }
 profile=${QT_PACKAGE_PROFILE:-release}
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
 state=/var/lib/qt-therapy
+# A check stopped halfway purges what it installed, so the next run (or CI) starts clean.
+installed=0
+cleanup() {
+  if [ "$installed" = 1 ]; then
+    echo "check.sh: stopped before the end: purging the package it installed" >&2
+    apt-get purge -y -qq qt-therapy >/dev/null 2>&1 || true
+    rm -rf "$state"
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
 fail() { echo "check.sh: FAILED: $*" >&2; exit 1; }
 step() { echo "== $*"; }
 export DEBIAN_FRONTEND=noninteractive
@@ -59,6 +69,7 @@ sort "$work/control/conffiles" | diff "$work/etc_files" - || fail "conffiles are
 grep -q '^Depends:.*libc6' "$work/control/control" || fail "no libc6 dependency"
 
 step "install"
+installed=1
 apt-get install -y -qq "$deb1" >"$work/install.out" 2>&1 || { cat "$work/install.out"; fail "apt install"; }
 grep qt-therapy: "$work/install.out" || true
 grep -q "set the therapist page's PIN" "$work/install.out" || fail "the install did not say to set the PIN"
@@ -87,13 +98,20 @@ exec $repo/tests/loopback-netns runuser -u qt-therapy -- /usr/lib/qt-therapy/sta
 SERVICE
 run_service() { timeout 300 bash "$work/run-service.sh"; }
 
-step "no PIN: refused with the reason, exit 78"
+step "no PIN, a short PIN: refused with the reason, exit 78"
 set +e
 run_service >"$work/refused.out" 2>&1
 rc=$?
 set -e
 [ "$rc" = 78 ] || { cat "$work/refused.out"; fail "exit $rc without a PIN, not 78"; }
 grep -q "no QT_TABLET_PIN" "$work/refused.out" || fail "the refusal does not name QT_TABLET_PIN"
+sed -i 's/^QT_TABLET_PIN=.*/QT_TABLET_PIN=12/' /etc/qt-therapy/environment
+set +e
+run_service >"$work/refused.out" 2>&1
+rc=$?
+set -e
+[ "$rc" = 78 ] || { cat "$work/refused.out"; fail "exit $rc with a 2-character PIN, not 78"; }
+grep -q "at least 4 characters" "$work/refused.out" || fail "the refusal does not say why: $(cat "$work/refused.out")"
 
 step "one simulated session by the installed start script"
 sed -i 's/^QT_TABLET_PIN=.*/QT_TABLET_PIN=8642/; s/^QT_THERAPY_LAUNCH=.*/QT_THERAPY_LAUNCH=simulated_session/' \
@@ -137,5 +155,6 @@ grep -q "deleting $state" "$work/purge.out" || fail "the purge did not say what 
 [ ! -e "$state" ] || fail "$state left after purge"
 [ ! -e /etc/qt-therapy ] || fail "/etc/qt-therapy left after purge"
 ! getent passwd qt-therapy >/dev/null || fail "the user left after purge"
+installed=0
 
 echo "package check: all passed"

@@ -19,8 +19,25 @@ use tokio::sync::mpsc;
     about = "The child and therapist tablets as web pages, bridged to the suite's DDS topics"
 )]
 struct Cli {
+    /// Check the parameters (the file, --param overrides, QT_TABLET_PIN) and ROS_DOMAIN_ID,
+    /// say what is wrong, and exit without starting (the installed service's start script
+    /// runs this before it starts the suite).
+    #[arg(long)]
+    check: bool,
     #[command(flatten)]
     shell: ShellOptions,
+}
+
+/// The bridge's parameters as it runs with them: the file, the overrides, then QT_TABLET_PIN,
+/// validated; errors name the file read.
+fn checked(params: &mut TabletBridgeParams, path: &std::path::Path) -> anyhow::Result<()> {
+    if let Ok(pin) = std::env::var("QT_TABLET_PIN") {
+        params.pin = pin;
+    }
+    params
+        .validate()
+        .with_context(|| format!("{} (or QT_TABLET_PIN for the pin)", path.display()))?;
+    Ok(())
 }
 
 /// Moves one subscription's messages into the bridge's single DDS input channel.
@@ -41,18 +58,19 @@ fn forward<M: Send + 'static>(
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    if cli.check {
+        let (mut params, path) = cli
+            .shell
+            .parameters::<TabletBridgeParams>("tablet_bridge")?;
+        checked(&mut params, &path)?;
+        node_shell::domain_id_from_env()?;
+        println!("{}: parameters and environment valid", path.display());
+        return Ok(());
+    }
     let (mut shell, mut params): (NodeShell, TabletBridgeParams) =
         NodeShell::start("tablet_bridge", &cli.shell)?;
-    if let Ok(pin) = std::env::var("QT_TABLET_PIN") {
-        params.pin = pin;
-    }
     // The file actually read (--params-file, QT_PARAMS_DIR or params/) is named, not the default.
-    params.validate().with_context(|| {
-        format!(
-            "{} (or QT_TABLET_PIN for the pin)",
-            cli.shell.params_path(shell.name()).display()
-        )
-    })?;
+    checked(&mut params, &cli.shell.params_path(shell.name()))?;
     let result = {
         let commands = shell.publisher(THERAPIST_COMMAND)?;
         let answers = shell.publisher(TABLET_ANSWER)?;

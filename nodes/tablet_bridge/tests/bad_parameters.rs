@@ -33,3 +33,49 @@ fn a_bad_value_is_named_with_the_file_it_came_from() {
     );
     assert!(!stderr.contains("params/tablet_bridge.yaml"), "{context}");
 }
+
+/// `--check` says what is wrong without joining DDS: the package's empty PIN until
+/// QT_TABLET_PIN sets one, a ROS_DOMAIN_ID out of range; and passes a setting it can run with.
+#[test]
+fn check_names_a_missing_pin_and_a_bad_domain_and_passes_a_good_setting() {
+    let bin = env!("CARGO_BIN_EXE_tablet_bridge");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("tablet_bridge.yaml");
+    std::fs::write(
+        &file,
+        "tablet_bridge:\n  ros__parameters:\n    http_bind: \"0.0.0.0:8080\"\n    pin: \"\"\n",
+    )
+    .expect("writes the parameter file");
+    let check = |pin: Option<&str>, domain: &str| {
+        let mut c = std::process::Command::new(bin);
+        c.args(["--check", "--params-file"])
+            .arg(&file)
+            .env("ROS_DOMAIN_ID", domain)
+            .env("RUST_BACKTRACE", "0")
+            .env("RUST_LIB_BACKTRACE", "0")
+            .env_remove("QT_TABLET_PIN");
+        if let Some(pin) = pin {
+            c.env("QT_TABLET_PIN", pin);
+        }
+        let out = c.output().expect("runs");
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned()
+                + &String::from_utf8_lossy(&out.stderr),
+        )
+    };
+    let (ok, out) = check(None, "0");
+    assert!(
+        !ok && out.contains("pin") && out.contains("QT_TABLET_PIN"),
+        "{out}"
+    );
+    let (ok, out) = check(Some("12"), "0");
+    assert!(!ok && out.contains("at least 4 characters"), "{out}");
+    let (ok, out) = check(Some("8642"), "300");
+    assert!(!ok && out.contains("ROS_DOMAIN_ID"), "{out}");
+    let (ok, out) = check(Some("8642"), "7");
+    assert!(
+        ok && out.contains("parameters and environment valid"),
+        "{out}"
+    );
+}
