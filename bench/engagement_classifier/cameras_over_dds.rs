@@ -86,7 +86,7 @@ fn main() -> anyhow::Result<()> {
     if cli.shell.params_file.is_none() && std::env::var_os("QT_PARAMS_DIR").is_none() {
         cli.shell.params_file = Some(
             Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../bench/engagement_classifier/cameras_over_dds.yaml"),
+                .join("engagement_classifier/cameras_over_dds.yaml"),
         );
     }
     let run = tokio::runtime::Builder::new_multi_thread()

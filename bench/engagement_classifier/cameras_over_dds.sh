@@ -37,7 +37,7 @@ export ROS_LOCALHOST_ONLY=1
 # which our async readers never drain, is full; seen in both processes from about 9.6 s into a
 # 30 fps camera on), which costs both processes CPU.
 NODE_LOG="$OUT/node.log"
-target/release/engagement_classifier run --params-file params/engagement_classifier.yaml \
+"${CARGO_TARGET_DIR:-target}"/release/engagement_classifier run --params-file params/engagement_classifier.yaml \
   >"$OUT/node.out" 2>"$NODE_LOG" &
 NODE=$!
 stop_node() {
@@ -72,7 +72,7 @@ for n in $CAMERAS; do
   echo
   echo "=== $n camera(s) x $FPS fps, $SECONDS_PER_RUN s"
   cpu0=$(node_cpu_ticks); t0=$(date +%s.%N)
-  target/release/cameras_over_dds --cameras "$n" --seconds "$SECONDS_PER_RUN" \
+  "${CARGO_TARGET_DIR:-target}"/release/cameras_over_dds --cameras "$n" --seconds "$SECONDS_PER_RUN" \
     --fps "$FPS" --seed "$SEED" --tsv "$TSV" --timeline 2>"$OUT/peer-$n.log" | tee "$OUT/peer-$n.txt"
   cpu1=$(node_cpu_ticks); t1=$(date +%s.%N)
   # The node's CPU over the peer's whole run (discovery, warm-up, measured seconds, settle).

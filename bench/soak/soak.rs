@@ -111,17 +111,25 @@ fn main() -> anyhow::Result<()> {
 #[derive(Clone, Copy)]
 struct Usage {
     rss_kb: u64,
+    /// The peak resident memory so far (VmHWM).
+    hwm_kb: u64,
     fds: u64,
 }
 
 fn usage(pid: u32) -> Option<Usage> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let rss_kb = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())?;
+    let kb = |key: &str| -> Option<u64> {
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix(key))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+    };
     let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count() as u64;
-    Some(Usage { rss_kb, fds })
+    Some(Usage {
+        rss_kb: kb("VmRSS:")?,
+        hwm_kb: kb("VmHWM:")?,
+        fds,
+    })
 }
 
 /// The DDS processes of this run must not reach any network but the namespace's loopback.
@@ -368,6 +376,8 @@ fn drive_one_console(d: &Driving) -> anyhow::Result<Driven> {
     use std::io::BufRead as _;
     wait_for_nodes(d.stderr_log)?;
     let mut driven = Driven::starting(d.out);
+    // After start: every node up, no session yet.
+    driven.samples.push((0, sample_nodes(d.stderr_log)));
     let base = format!("soak-{}", d.run_id);
     let soak_started = Instant::now();
     let mut console = run_session_command(d.bin, d.root, &base, d.cli.session_timeout)
@@ -428,6 +438,7 @@ fn drive(d: &Driving) -> anyhow::Result<Driven> {
         samples.push((done, sample_nodes(d.stderr_log)));
     };
     let mut driven = Driven::starting(d.out);
+    sample(0, &mut driven.samples);
     let soak_started = Instant::now();
     let mut consecutive_failures = 0;
     for k in 1..=d.cli.sessions {
@@ -875,6 +886,39 @@ fn median(mut v: Vec<u64>) -> f64 {
     }
 }
 
+/// Each node's resident memory and its peak (VmRSS / VmHWM, MiB) after start, after the first
+/// session and after the last.
+fn memory_table(samples: &[(u32, BTreeMap<String, Usage>)]) {
+    let at = |done: u32| samples.iter().find(|(n, _)| *n == done);
+    let (Some(start), Some(one), Some(last)) = (at(0), at(1), samples.last()) else {
+        return;
+    };
+    println!(
+        "\nresident memory / peak (VmRSS / VmHWM, MiB) after start, 1 session and {} sessions:",
+        last.0
+    );
+    println!(
+        "  {:<22} {:>15} {:>15} {:>15}",
+        "node", "start", "1", last.0
+    );
+    for n in NODES {
+        let cell = |row: &(u32, BTreeMap<String, Usage>)| match row.1.get(n) {
+            Some(u) => format!(
+                "{:.1} / {:.1}",
+                u.rss_kb as f64 / 1024.0,
+                u.hwm_kb as f64 / 1024.0
+            ),
+            None => "gone".into(),
+        };
+        println!(
+            "  {n:<22} {:>15} {:>15} {:>15}",
+            cell(start),
+            cell(one),
+            cell(last)
+        );
+    }
+}
+
 /// Prints the samples and, per node, first-quarter vs last-quarter medians; true when flat.
 fn resource_verdict(cli: &Cli, samples: &[(u32, BTreeMap<String, Usage>)]) -> bool {
     println!("\nresident memory (MiB) / open file descriptors, after N sessions:");
@@ -899,6 +943,14 @@ fn resource_verdict(cli: &Cli, samples: &[(u32, BTreeMap<String, Usage>)]) -> bo
         }
         println!();
     }
+    memory_table(samples);
+    // Growth is over sessions played: the sample taken before the first is left out.
+    let samples: Vec<(u32, BTreeMap<String, Usage>)> = samples
+        .iter()
+        .filter(|(done, _)| *done > 0)
+        .cloned()
+        .collect();
+    let samples = samples.as_slice();
     let q = (samples.len() / 4).max(1);
     let first = &samples[..q.min(samples.len())];
     let last = &samples[samples.len().saturating_sub(q)..];

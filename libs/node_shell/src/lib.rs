@@ -14,7 +14,7 @@ pub mod tap;
 
 pub use shell::{
     CallError, NoParameters, NodeShell, Outbox, ServiceCall, ServiceClient, ShellOptions,
-    domain_id_from_env, localhost_only_from_env, qos_profile,
+    domain_id_from_env, localhost_only_from_env, qos_profile, ros_name, service_qos,
 };
 
 use qt_therapy_msgs::builtin_interfaces::Time;

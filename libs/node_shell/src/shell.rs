@@ -221,11 +221,13 @@ fn rosout(
     Ok((publisher, drain))
 }
 
-fn service_qos() -> QosProfile {
+/// The QoS of the suite's services' request and response topics, the same on both sides.
+pub fn service_qos() -> QosProfile {
     qos_profile(QosKind::Reliable).history(History::KeepLast { depth: 10 })
 }
 
-fn ros_name(full: &str) -> anyhow::Result<Name> {
+/// A full topic or service name (`/qt_therapy/x`) as ros2-client's namespace and base name.
+pub fn ros_name(full: &str) -> anyhow::Result<Name> {
     let (ns, base) = match full.rsplit_once('/') {
         Some(("", base)) => ("/", base),
         Some((ns, base)) => (ns, base),

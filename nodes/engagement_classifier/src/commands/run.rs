@@ -28,7 +28,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    tokio::runtime::Builder::new_multi_thread()
+    // One thread: each frame is microseconds of work and nothing here blocks, and a frame
+    // handed from node_shell's reader task to this loop then wakes no other thread (40-50 µs
+    // a frame at the median on the multi-threaded runtime: docs/performance.md, "DDS").
+    tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")?
