@@ -228,6 +228,19 @@ impl BagReader {
         self.messages::<M>(topic.name)
     }
 
+    /// The messages of one of the suite's topics without their stamps, none when the bag does
+    /// not have the topic (a session where nothing was sent on it).
+    pub fn topic_messages<M: MessageDefinition>(
+        &self,
+        topic: Topic<M>,
+    ) -> Result<Vec<M>, BagError> {
+        match self.messages::<M>(topic.name) {
+            Ok(v) => Ok(v.into_iter().map(|s| s.message).collect()),
+            Err(BagError::NoSuchTopic { .. }) => Ok(Vec::new()),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Messages per channel id.
     pub fn counts(&self) -> BTreeMap<u16, u64> {
         let mut counts: BTreeMap<u16, u64> = self.scan.channels.keys().map(|&id| (id, 0)).collect();

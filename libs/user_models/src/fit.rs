@@ -174,72 +174,7 @@ pub fn fit(
                 users: members.iter().map(|m| m.to_string()).collect(),
             });
         }
-        let recs: Vec<&InteractionRecord> = records
-            .iter()
-            .filter(|r| members.contains(&r.user_id.as_str()))
-            .collect();
-        let ((px, py), (ex, ey)) = training_sets(&recs);
-        let member_vectors: Vec<&[f64; 6]> = users
-            .iter()
-            .filter(|(u, _)| members.contains(&u.as_str()))
-            .map(|(_, v)| v)
-            .collect();
-        // Fig. 3b: means over the cluster's sequences (the authors' per-cluster numbers),
-        // spread across its users.
-        let levels = Level::ALL
-            .iter()
-            .map(|l| {
-                let at: Vec<&&InteractionRecord> = recs.iter().filter(|r| r.level == *l).collect();
-                let s: Vec<f64> = at
-                    .iter()
-                    .map(|r| f64::from(u8::from(r.outcome == Outcome::Success)))
-                    .collect();
-                let e: Vec<f64> = at.iter().filter_map(|r| r.engagement).collect();
-                let user_s: Vec<f64> = member_vectors.iter().map(|v| v[2 * l.index()]).collect();
-                let user_e: Vec<f64> = member_vectors
-                    .iter()
-                    .map(|v| v[2 * l.index() + 1])
-                    .collect();
-                LevelStats {
-                    level: l.get(),
-                    sequences: at.len(),
-                    success_mean: mean(&s),
-                    success_std: std(&user_s),
-                    engagement_mean: mean(&e),
-                    engagement_std: std(&user_e),
-                }
-            })
-            .collect();
-        let seed = options.seed.wrapping_add(1000 * k as u64);
-        let optimiser = |seed| {
-            options.optimise.then_some(OptimiserOptions {
-                bounds: options.bounds,
-                restarts: options.optimiser_restarts,
-                seed,
-            })
-        };
-        let gp_err = |component| {
-            move |source| UserModelError::Gp {
-                cluster: k,
-                component,
-                source,
-            }
-        };
-        clusters.push(ClusterModel {
-            cluster: k,
-            users: members.iter().map(|m| m.to_string()).collect(),
-            levels,
-            success: GpComponent::fit(px, py, options.kernel, options.noise, optimiser(seed))
-                .map_err(gp_err("F^p"))?,
-            engagement: GpComponent::fit(
-                ex,
-                ey,
-                options.kernel,
-                options.noise,
-                optimiser(seed + 1),
-            )
-            .map_err(gp_err("F^e"))?,
-        });
+        clusters.push(fit_cluster(k, &members, &users, records, options)?);
     }
     let file = UserModelFile {
         format: FORMAT.into(),
@@ -261,6 +196,99 @@ pub fn fit(
         clusters,
     };
     UserModelSet::from_file(file)
+}
+
+/// One cluster's model from its members' records: the GPs on the authors' targets and the
+/// per-level numbers of Fig. 3b.
+fn fit_cluster(
+    k: usize,
+    members: &[&str],
+    users: &[(String, [f64; 6])],
+    records: &[InteractionRecord],
+    options: &FitOptions,
+) -> Result<ClusterModel, UserModelError> {
+    let recs: Vec<&InteractionRecord> = records
+        .iter()
+        .filter(|r| members.contains(&r.user_id.as_str()))
+        .collect();
+    let ((px, py), (ex, ey)) = training_sets(&recs);
+    let member_vectors: Vec<&[f64; 6]> = users
+        .iter()
+        .filter(|(u, _)| members.contains(&u.as_str()))
+        .map(|(_, v)| v)
+        .collect();
+    // Fig. 3b: means over the cluster's sequences (the authors' per-cluster numbers),
+    // spread across its users.
+    let levels = Level::ALL
+        .iter()
+        .map(|l| {
+            let at: Vec<&&InteractionRecord> = recs.iter().filter(|r| r.level == *l).collect();
+            let s: Vec<f64> = at
+                .iter()
+                .map(|r| f64::from(u8::from(r.outcome == Outcome::Success)))
+                .collect();
+            let e: Vec<f64> = at.iter().filter_map(|r| r.engagement).collect();
+            let user_s: Vec<f64> = member_vectors.iter().map(|v| v[2 * l.index()]).collect();
+            let user_e: Vec<f64> = member_vectors
+                .iter()
+                .map(|v| v[2 * l.index() + 1])
+                .collect();
+            LevelStats {
+                level: l.get(),
+                sequences: at.len(),
+                success_mean: mean(&s),
+                success_std: std(&user_s),
+                engagement_mean: mean(&e),
+                engagement_std: std(&user_e),
+            }
+        })
+        .collect();
+    let seed = options.seed.wrapping_add(1000 * k as u64);
+    let optimiser = |seed| {
+        options.optimise.then_some(OptimiserOptions {
+            bounds: options.bounds,
+            restarts: options.optimiser_restarts,
+            seed,
+        })
+    };
+    let gp_err = |component| {
+        move |source| UserModelError::Gp {
+            cluster: k,
+            component,
+            source,
+        }
+    };
+    Ok(ClusterModel {
+        cluster: k,
+        users: members.iter().map(|m| m.to_string()).collect(),
+        levels,
+        success: GpComponent::fit(px, py, options.kernel, options.noise, optimiser(seed))
+            .map_err(gp_err("F^p"))?,
+        engagement: GpComponent::fit(ex, ey, options.kernel, options.noise, optimiser(seed + 1))
+            .map_err(gp_err("F^e"))?,
+    })
+}
+
+/// One user's own model, fitted from their records alone as a cluster of one (the GPs on
+/// their groups), tabulated. What a per-child study simulates the child with.
+pub fn fit_user(
+    user: &str,
+    records: &[InteractionRecord],
+    options: &FitOptions,
+) -> Result<sequence_game::UserModelTable, UserModelError> {
+    let own: Vec<InteractionRecord> = records
+        .iter()
+        .filter(|r| r.user_id == user)
+        .cloned()
+        .collect();
+    validate_all(&own)?;
+    let users = user_vectors(&own)?;
+    if users.is_empty() {
+        return Err(UserModelError::Options(format!(
+            "no records of user {user:?}"
+        )));
+    }
+    fit_cluster(0, &[user], &users, &own, options)?.tabulate()
 }
 
 #[cfg(test)]

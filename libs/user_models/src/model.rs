@@ -175,6 +175,69 @@ pub struct ClusterModel {
     pub engagement: GpComponent,
 }
 
+impl ClusterModel {
+    /// Builds the cluster's GPs and tabulates every prediction (clamped to [0, 1] and
+    /// [-1, 1]).
+    pub fn tabulate(&self) -> Result<UserModelTable, UserModelError> {
+        let c = self;
+        let gp_err = |component| {
+            move |source| UserModelError::Gp {
+                cluster: c.cluster,
+                component,
+                source,
+            }
+        };
+        let success = c.success.build().map_err(gp_err("F^p"))?;
+        let engagement = c.engagement.build().map_err(gp_err("F^e"))?;
+        let mut failure: Option<UserModelError> = None;
+        let mut note = |component: &'static str, e: GpError| {
+            failure.get_or_insert(UserModelError::Gp {
+                cluster: c.cluster,
+                component,
+                source: e,
+            });
+            Prediction {
+                mean: 0.0,
+                std: 0.0,
+            }
+        };
+        let mut predictions = Vec::new();
+        for input in ModelInput::all() {
+            predictions.push(
+                match success.predict(&c.success.standardise(&encode(input, None))) {
+                    Ok((m, s)) => Prediction {
+                        mean: m.clamp(0.0, 1.0),
+                        std: s,
+                    },
+                    Err(e) => note("F^p", e),
+                },
+            );
+        }
+        let mut engagement_predictions = Vec::new();
+        for input in ModelInput::all() {
+            for o in Outcome::ALL {
+                let x = c.engagement.standardise(&encode(input, Some(o)));
+                engagement_predictions.push(match engagement.predict(&x) {
+                    Ok((m, s)) => Prediction {
+                        mean: m.clamp(-1.0, 1.0),
+                        std: s,
+                    },
+                    Err(e) => note("F^e", e),
+                });
+            }
+        }
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        // Built in table order: ModelInput::all(), then Outcome::ALL within each input.
+        Ok(UserModelTable {
+            cluster: c.cluster,
+            success: predictions,
+            engagement: engagement_predictions,
+        })
+    }
+}
+
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -377,64 +440,11 @@ impl UserModelSet {
     /// Builds the GPs of `file` and tabulates every prediction (clamped to [0, 1] and
     /// [-1, 1]).
     pub fn from_file(file: UserModelFile) -> Result<UserModelSet, UserModelError> {
-        let mut tables = Vec::new();
-        for c in &file.clusters {
-            let gp_err = |component| {
-                move |source| UserModelError::Gp {
-                    cluster: c.cluster,
-                    component,
-                    source,
-                }
-            };
-            let success = c.success.build().map_err(gp_err("F^p"))?;
-            let engagement = c.engagement.build().map_err(gp_err("F^e"))?;
-            let mut failure: Option<UserModelError> = None;
-            let mut note = |component: &'static str, e: GpError| {
-                failure.get_or_insert(UserModelError::Gp {
-                    cluster: c.cluster,
-                    component,
-                    source: e,
-                });
-                Prediction {
-                    mean: 0.0,
-                    std: 0.0,
-                }
-            };
-            let mut predictions = Vec::new();
-            for input in ModelInput::all() {
-                predictions.push(
-                    match success.predict(&c.success.standardise(&encode(input, None))) {
-                        Ok((m, s)) => Prediction {
-                            mean: m.clamp(0.0, 1.0),
-                            std: s,
-                        },
-                        Err(e) => note("F^p", e),
-                    },
-                );
-            }
-            let mut engagement_predictions = Vec::new();
-            for input in ModelInput::all() {
-                for o in Outcome::ALL {
-                    let x = c.engagement.standardise(&encode(input, Some(o)));
-                    engagement_predictions.push(match engagement.predict(&x) {
-                        Ok((m, s)) => Prediction {
-                            mean: m.clamp(-1.0, 1.0),
-                            std: s,
-                        },
-                        Err(e) => note("F^e", e),
-                    });
-                }
-            }
-            if let Some(e) = failure {
-                return Err(e);
-            }
-            // Built in table order: ModelInput::all(), then Outcome::ALL within each input.
-            tables.push(UserModelTable {
-                cluster: c.cluster,
-                success: predictions,
-                engagement: engagement_predictions,
-            });
-        }
+        let tables = file
+            .clusters
+            .iter()
+            .map(ClusterModel::tabulate)
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(UserModelSet { file, tables })
     }
 

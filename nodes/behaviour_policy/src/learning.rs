@@ -240,6 +240,46 @@ pub fn nth_member(set: u8, k: u32) -> usize {
     s.trailing_zeros() as usize
 }
 
+/// How many of a1..a5 may be chosen for the sequence `step` (1-based) from `state`: a1..a3 at
+/// the first sequence and in the start state (no context for feedback yet), else all five.
+pub fn allowed_at(state: State, step: u8) -> usize {
+    if step <= 1 {
+        LEVEL_COUNT
+    } else {
+        allowed_count(state)
+    }
+}
+
+/// The probability of each action: the softmax at `temperature` over the first `allowed`
+/// actions (`Mode::Explore`), or uniform over the greedy ties (`Mode::Exploit`); 0 for the
+/// masked actions. What the live policy reports with each decision and what counterfactual
+/// evaluation weighs recorded decisions with.
+pub fn action_probabilities(
+    row: &[f64; ACTION_COUNT],
+    allowed: usize,
+    mode: Mode,
+    temperature: f64,
+) -> [f64; ACTION_COUNT] {
+    let mut probabilities = [0.0; ACTION_COUNT];
+    match mode {
+        Mode::Explore => {
+            let s = softmax_weights(row, allowed, temperature);
+            for (p, w) in probabilities.iter_mut().zip(&s.weights).take(allowed) {
+                *p = w / s.total;
+            }
+        }
+        Mode::Exploit => {
+            let (set, n) = greedy_set(row, allowed);
+            for (a, p) in probabilities.iter_mut().enumerate() {
+                if set & (1 << a) != 0 {
+                    *p = 1.0 / f64::from(n);
+                }
+            }
+        }
+    }
+    probabilities
+}
+
 /// The Q-learning target: r + γ max_a' Q(s', a'), or r alone on a session's last step (the
 /// authors' episode end).
 #[inline]

@@ -2,15 +2,19 @@
 //! Q-learning over states (L, F, PS) with actions a1..a5, softmax exploration with a per-state
 //! temperature, rewards RE / RE + βE / λE against a cluster's user model, an exploitation-only
 //! mode, policy transfer, the evaluation's experiments with Figs. 4 and 5, Q-table files, and
-//! the sans-IO core of the decision node. Depends on user models only through
-//! `sequence_game::UserModelTable`.
+//! the sans-IO core of the decision node, counterfactual evaluation of a new policy on
+//! recorded sessions, and the per-child adaptation study (which fits user models, through
+//! `user_models`; the rest sees user models only as `sequence_game::UserModelTable`).
 
 pub mod cluster_policies;
+pub mod evaluation_plot;
 pub mod experiments;
 pub mod grid;
 pub mod learning;
 pub mod messages;
+pub mod off_policy;
 pub mod params;
+pub mod per_child;
 pub mod persistent;
 pub mod plot;
 pub mod policy_core;

@@ -2,6 +2,8 @@
 //!   behaviour_policy experiments --epochs 400 --runs 30 --output out/policy
 //!   behaviour_policy train --cluster 1 --transfer-from 0     (a Q-table file for the node)
 //!   behaviour_policy show-q-table out/q_tables/cluster_0.json
+//!   behaviour_policy evaluate --bags bags --q-table NEW.json  (judge a policy on old sessions)
+//!   behaviour_policy per-child                               (leave-one-child-out adaptation)
 //!   behaviour_policy run                                     (the DDS decision node)
 
 mod commands;
@@ -23,6 +25,14 @@ enum Command {
     Train(commands::train::Args),
     /// Print a Q-table file: per state its Q-values, greedy action, visits, temperature.
     ShowQTable(commands::show_q_table::Args),
+    /// Judge a Q-table's policy on recorded sessions (off-policy importance sampling).
+    Evaluate(commands::evaluate::Args),
+    /// Check `evaluate`'s estimators where the truth is known: sessions logged against a user
+    /// model, the judged policy's exact value beside the estimates, over many seeds.
+    EvaluateInSimulation(commands::evaluate::SimulationArgs),
+    /// Per-child adaptation: leave one study child out, compare the cluster's policy, a
+    /// per-user table started from it and a table learned from scratch on the child.
+    PerChild(commands::per_child::Args),
     /// Run the decision node over DDS.
     Run {
         #[command(flatten)]
@@ -35,6 +45,9 @@ fn main() -> anyhow::Result<()> {
         Command::Experiments(a) => commands::experiments::run(a),
         Command::Train(a) => commands::train::run(a),
         Command::ShowQTable(a) => commands::show_q_table::run(a),
+        Command::Evaluate(a) => commands::evaluate::run(a),
+        Command::EvaluateInSimulation(a) => commands::evaluate::run_in_simulation(a),
+        Command::PerChild(a) => commands::per_child::run(a),
         Command::Run { shell } => tokio::runtime::Builder::new_multi_thread()
             .enable_all()
             .build()?

@@ -3,8 +3,8 @@
 //! data out: the node moves messages and saves files (see `persistent`).
 
 use crate::learning::{
-    Learning, Mode, QTable, allowed_count, greedy_set, nth_member, sample_weights, softmax_weights,
-    td_target,
+    Learning, Mode, QTable, action_probabilities, allowed_at, greedy_set, nth_member,
+    sample_weights, softmax_weights, td_target,
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -153,33 +153,21 @@ impl PolicyCore {
         if step == 0 {
             return Err(PolicyError::Step(step));
         }
-        let allowed = if step == 1 {
-            LEVEL_COUNT
-        } else {
-            allowed_count(state)
-        };
+        let allowed = allowed_at(state, step);
         let row = *self.table.row(state);
         let temperature = self
             .learning
             .temperature
             .at(self.table.visits[state.index()]);
-        let mut probabilities = [0.0; ACTION_COUNT];
+        let probabilities = action_probabilities(&row, allowed, self.mode, temperature);
         let (index, explored) = match self.mode {
             Mode::Explore => {
                 let s = softmax_weights(&row, allowed, temperature);
-                for (p, w) in probabilities.iter_mut().zip(&s.weights).take(allowed) {
-                    *p = w / s.total;
-                }
                 let a = sample_weights(&s.weights, allowed, s.total, self.rng.random::<f64>());
                 (a, row[a] < s.best)
             }
             Mode::Exploit => {
                 let (set, n) = greedy_set(&row, allowed);
-                for (a, p) in probabilities.iter_mut().enumerate() {
-                    if set & (1 << a) != 0 {
-                        *p = 1.0 / f64::from(n);
-                    }
-                }
                 let k = if n > 1 {
                     self.rng.random_range(0..n)
                 } else {

@@ -214,3 +214,154 @@ fn the_fitted_user_models_in_the_repository_load() {
     ]);
     assert!(shown.contains("fitted user models"), "{shown}");
 }
+
+#[test]
+fn evaluate_judges_a_q_table_on_the_sample_bags_and_skips_what_it_cannot_read() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let broken = dir.path().join("broken.mcap");
+    std::fs::write(&broken, b"not a bag").expect("write");
+    let out = dir.path().join("evaluate");
+    let shown = ok(&[
+        "evaluate",
+        "--bags",
+        "../../bags",
+        path(&broken),
+        "--q-table",
+        "../../bags/q_tables/cluster_0.json",
+        "--temperature",
+        "1",
+        "--bootstrap",
+        "200",
+        "--output",
+        path(&out),
+    ]);
+    // One whole session played by the policy; the stopped one and the one the therapist
+    // steered are left out with their reasons; the broken file is named and skipped.
+    assert!(shown.contains("3 read, 1 skipped"), "{shown}");
+    assert!(
+        shown.contains("sessions: 1 evaluated, 2 left out"),
+        "{shown}"
+    );
+    assert!(shown.contains("incomplete"), "{shown}");
+    assert!(shown.contains("the therapist chose sequence 3"), "{shown}");
+    assert!(shown.contains("new policy, weighted IS"), "{shown}");
+    // The sessions were played greedily: a softmax policy's other actions were never seen.
+    assert!(
+        shown.contains("what importance sampling cannot see"),
+        "{shown}"
+    );
+    assert!(shown.contains("WARNING"), "{shown}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evaluation.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(json["sessions"], 1);
+    assert_eq!(json["decisions"], 10);
+    assert!(out.join("evaluation.png").is_file());
+
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            path(dir.path()),
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--output",
+            path(&out),
+        ],
+        "no whole session",
+    );
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            "../../bags",
+            "--q-table",
+            path(&broken),
+        ],
+        "--q-table",
+    );
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            "../../bags",
+            "--q-table",
+            "x.json",
+            "--temperature",
+            "hot",
+        ],
+        "greedy",
+    );
+}
+
+#[test]
+fn evaluate_in_simulation_reports_bias_and_coverage_against_the_exact_value() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shown = ok(&[
+        "evaluate-in-simulation",
+        "--per-level-reference",
+        "--logging-q-table",
+        "../../bags/q_tables/cluster_0.json",
+        "--logging-temperature",
+        "2",
+        "--q-table",
+        "../../bags/q_tables/cluster_0.json",
+        "--temperature",
+        "1",
+        "--sessions",
+        "100",
+        "--seeds",
+        "10",
+        "--bootstrap",
+        "100",
+        "--output",
+        path(dir.path()),
+    ]);
+    assert!(shown.contains("exact value per session"), "{shown}");
+    assert!(shown.contains("weighted IS, return"), "{shown}");
+    assert!(shown.contains("% of 10"), "{shown}");
+    assert!(dir.path().join("validation.json").is_file());
+    assert!(dir.path().join("validation.png").is_file());
+}
+
+#[test]
+fn per_child_runs_on_the_study_or_says_where_it_looked() {
+    fails(
+        &["per-child", "--study", "/nonexistent/study", "--seeds", "1"],
+        "/nonexistent/study: no such folder",
+    );
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/migrave-study");
+    if !study.is_dir() {
+        eprintln!("skipped: {} is absent", study.display());
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shown = ok(&[
+        "per-child",
+        "--study",
+        path(&study),
+        "--sessions",
+        "3",
+        "--seeds",
+        "2",
+        "--pretrain-epochs",
+        "5",
+        "--pretrain-runs",
+        "1",
+        "--output",
+        path(dir.path()),
+    ]);
+    assert!(shown.contains("20 children"), "{shown}");
+    for arm in [
+        "cluster policy",
+        "per-user table",
+        "from scratch",
+        "ceiling",
+    ] {
+        assert!(shown.contains(arm), "{arm}: {shown}");
+    }
+    let csv = std::fs::read_to_string(dir.path().join("per_child.csv")).expect("csv");
+    // 20 children x 4 policies x 2 seeds x 3 sessions, and the header.
+    assert_eq!(csv.lines().count(), 1 + 20 * 4 * 2 * 3);
+    assert!(dir.path().join("per_child.png").is_file());
+}

@@ -51,17 +51,7 @@ impl SessionLog {
         session: Option<&str>,
     ) -> Result<SessionLog, bag_file::BagError> {
         use qt_therapy_msgs::topics::{DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT};
-        fn read<M: qt_therapy_msgs::MessageDefinition>(
-            reader: &bag_file::BagReader,
-            topic: &str,
-        ) -> Result<Vec<M>, bag_file::BagError> {
-            match reader.messages::<M>(topic) {
-                Ok(v) => Ok(v.into_iter().map(|s| s.message).collect()),
-                Err(bag_file::BagError::NoSuchTopic { .. }) => Ok(Vec::new()),
-                Err(e) => Err(e),
-            }
-        }
-        let results: Vec<SequenceResult> = read(reader, SEQUENCE_RESULT.name)?;
+        let results: Vec<SequenceResult> = reader.topic_messages(SEQUENCE_RESULT)?;
         let wanted = session
             .map(str::to_string)
             .or_else(|| results.last().map(|r| r.session_id.clone()))
@@ -71,15 +61,17 @@ impl SessionLog {
                 .into_iter()
                 .filter(|r| r.session_id == wanted)
                 .collect(),
-            decisions: read::<Decision>(reader, DECISION.name)?
+            decisions: reader
+                .topic_messages(DECISION)?
                 .into_iter()
                 .filter(|d| d.session_id == wanted)
                 .collect(),
-            states: read::<GameState>(reader, GAME_STATE.name)?
+            states: reader
+                .topic_messages(GAME_STATE)?
                 .into_iter()
                 .filter(|s| s.session_id == wanted)
                 .collect(),
-            engagement: read(reader, EXPECTED_ENGAGEMENT.name)?,
+            engagement: reader.topic_messages(EXPECTED_ENGAGEMENT)?,
         };
         // Engagement carries no session id: keep the seconds of this session's time span.
         let start = log.states.first().map(|s| s.header.stamp.to_nanos());

@@ -1,7 +1,9 @@
 //! The subcommands of the `behaviour_policy` binary, one module each, and what they share:
 //! the learning constants on the command line and loading user models.
 
+pub mod evaluate;
 pub mod experiments;
+pub mod per_child;
 pub mod run;
 pub mod show_q_table;
 pub mod train;
