@@ -4,6 +4,7 @@
 
 use crate::experiments::EpochMetrics;
 use crate::grid::Curve;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 const COLOURS: [RGBColor; 6] = [
@@ -90,15 +91,17 @@ fn draw_legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> Result<(), String> {
         .map_err(err)
 }
 
-/// Draws the figure; `subtitle` says where the numbers came from.
-pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<String, String> {
-    let mut clusters: Vec<usize> = curves.iter().map(|c| c.config.cluster).collect();
-    clusters.sort_unstable();
-    clusters.dedup();
+/// An SVG `size` pixels large: `subtitle` on top, then `count` panels side by side, panel i
+/// drawn by `draw(i, panel)`. Every figure of the policy's commands is one.
+pub(crate) fn panels_svg(
+    size: (u32, u32),
+    subtitle: &str,
+    count: usize,
+    mut draw: impl FnMut(usize, &DrawingArea<SVGBackend<'_>, Shift>) -> Result<(), String>,
+) -> Result<String, String> {
     let mut svg = String::new();
     {
-        let width = 40 + 600 * clusters.len().max(1) as u32;
-        let root = SVGBackend::with_string(&mut svg, (width, 500)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         let root = root
             .titled(
@@ -106,59 +109,76 @@ pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<St
                 ("sans-serif", 14).into_font().color(&BLACK.mix(0.7)),
             )
             .map_err(err)?;
-        let panels = root.split_evenly((1, clusters.len().max(1)));
-        for (panel, &k) in panels.iter().zip(&clusters) {
-            let mine: Vec<&Curve> = curves.iter().filter(|c| c.config.cluster == k).collect();
-            let epochs = mine.iter().map(|c| c.mean.len()).max().unwrap_or(1).max(2);
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for c in &mine {
-                for (m, s) in c.mean.iter().zip(&c.std) {
-                    lo = lo.min(figure.value(m) - figure.value(s));
-                    hi = hi.max(figure.value(m) + figure.value(s));
-                }
-            }
-            if !(lo.is_finite() && hi.is_finite()) {
-                (lo, hi) = (0.0, 1.0);
-            }
-            // Room below the curves for the legend.
-            let range = (hi - lo).max(0.1);
-            let (bottom, top) = (lo - 0.32 * range, hi + 0.05 * range);
-            let mut chart = ChartBuilder::on(panel)
-                .caption(format!("M{} (cluster {k})", k + 1), ("sans-serif", 20))
-                .margin(14)
-                .x_label_area_size(40)
-                .y_label_area_size(55)
-                .build_cartesian_2d(1.0..epochs as f64, bottom..top)
-                .map_err(err)?;
-            chart
-                .configure_mesh()
-                .x_desc("epoch (100 sessions)")
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.2}"))
-                .y_desc(figure.label())
-                .light_line_style(WHITE.mix(0.0))
-                .draw()
-                .map_err(err)?;
-            for (i, c) in mine.iter().enumerate() {
-                let points: Vec<(f64, f64, f64)> = c
-                    .mean
-                    .iter()
-                    .zip(&c.std)
-                    .enumerate()
-                    .map(|(e, (m, s))| ((e + 1) as f64, figure.value(m), figure.value(s)))
-                    .collect();
-                draw_band(
-                    &mut chart,
-                    &points,
-                    COLOURS[i % COLOURS.len()],
-                    &c.config.name,
-                )?;
-            }
-            draw_legend(&mut chart)?;
+        for (i, panel) in root
+            .split_evenly((1, count.max(1)))
+            .iter()
+            .enumerate()
+            .take(count)
+        {
+            draw(i, panel)?;
         }
         root.present().map_err(err)?;
     }
     Ok(svg)
+}
+
+/// Draws the figure; `subtitle` says where the numbers came from.
+pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<String, String> {
+    let mut clusters: Vec<usize> = curves.iter().map(|c| c.config.cluster).collect();
+    clusters.sort_unstable();
+    clusters.dedup();
+    let width = 40 + 600 * clusters.len().max(1) as u32;
+    panels_svg((width, 500), subtitle, clusters.len(), |i, panel| {
+        let k = clusters[i];
+        let mine: Vec<&Curve> = curves.iter().filter(|c| c.config.cluster == k).collect();
+        let epochs = mine.iter().map(|c| c.mean.len()).max().unwrap_or(1).max(2);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for c in &mine {
+            for (m, s) in c.mean.iter().zip(&c.std) {
+                lo = lo.min(figure.value(m) - figure.value(s));
+                hi = hi.max(figure.value(m) + figure.value(s));
+            }
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            (lo, hi) = (0.0, 1.0);
+        }
+        // Room below the curves for the legend.
+        let range = (hi - lo).max(0.1);
+        let (bottom, top) = (lo - 0.32 * range, hi + 0.05 * range);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("M{} (cluster {k})", k + 1), ("sans-serif", 20))
+            .margin(14)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(1.0..epochs as f64, bottom..top)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("epoch (100 sessions)")
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.2}"))
+            .y_desc(figure.label())
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(err)?;
+        for (i, c) in mine.iter().enumerate() {
+            let points: Vec<(f64, f64, f64)> = c
+                .mean
+                .iter()
+                .zip(&c.std)
+                .enumerate()
+                .map(|(e, (m, s))| ((e + 1) as f64, figure.value(m), figure.value(s)))
+                .collect();
+            draw_band(
+                &mut chart,
+                &points,
+                COLOURS[i % COLOURS.len()],
+                &c.config.name,
+            )?;
+        }
+        draw_legend(&mut chart)?;
+        Ok(())
+    })
 }
 
 /// The per-child study: per session of the run, the mean over children (± std over seeds) of
@@ -168,61 +188,49 @@ pub fn per_child_svg(
     subtitle: &str,
 ) -> Result<String, String> {
     use crate::per_child::{Arm, Metric, curve};
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (1500, 480)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        let root = root
-            .titled(
-                subtitle,
-                ("sans-serif", 14).into_font().color(&BLACK.mix(0.7)),
-            )
-            .map_err(err)?;
-        let panels = root.split_evenly((1, Metric::ALL.len()));
-        for (panel, metric) in panels.iter().zip(Metric::ALL) {
-            let curves: Vec<(Arm, Vec<crate::per_child::MeanStd>)> = Arm::ALL
-                .iter()
-                .map(|&a| (a, curve(results, a, metric)))
-                .collect();
-            let sessions = curves.first().map_or(1, |c| c.1.len()).max(2);
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for (_, c) in &curves {
-                for m in c {
-                    lo = lo.min(m.mean - m.std);
-                    hi = hi.max(m.mean + m.std);
-                }
+    panels_svg((1500, 480), subtitle, Metric::ALL.len(), |i, panel| {
+        let metric = Metric::ALL[i];
+        let curves: Vec<(Arm, Vec<crate::per_child::MeanStd>)> = Arm::ALL
+            .iter()
+            .map(|&a| (a, curve(results, a, metric)))
+            .collect();
+        let sessions = curves.first().map_or(1, |c| c.1.len()).max(2);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (_, c) in &curves {
+            for m in c {
+                lo = lo.min(m.mean - m.std);
+                hi = hi.max(m.mean + m.std);
             }
-            if !(lo.is_finite() && hi.is_finite()) {
-                (lo, hi) = (0.0, 1.0);
-            }
-            let range = (hi - lo).max(0.1);
-            let (bottom, top) = (lo - 0.45 * range, hi + 0.05 * range);
-            let mut chart = ChartBuilder::on(panel)
-                .caption(format!("{} per session", metric.name()), ("sans-serif", 20))
-                .margin(14)
-                .x_label_area_size(40)
-                .y_label_area_size(55)
-                .build_cartesian_2d(1.0..sessions as f64, bottom..top)
-                .map_err(err)?;
-            chart
-                .configure_mesh()
-                .x_desc("session with the child")
-                .x_label_formatter(&|x| format!("{x:.0}"))
-                .y_label_formatter(&|y| format!("{y:.2}"))
-                .light_line_style(WHITE.mix(0.0))
-                .draw()
-                .map_err(err)?;
-            for (i, (arm, c)) in curves.iter().enumerate() {
-                let points: Vec<(f64, f64, f64)> = c
-                    .iter()
-                    .enumerate()
-                    .map(|(k, m)| ((k + 1) as f64, m.mean, m.std))
-                    .collect();
-                draw_band(&mut chart, &points, COLOURS[i % COLOURS.len()], arm.name())?;
-            }
-            draw_legend(&mut chart)?;
         }
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        if !(lo.is_finite() && hi.is_finite()) {
+            (lo, hi) = (0.0, 1.0);
+        }
+        let range = (hi - lo).max(0.1);
+        let (bottom, top) = (lo - 0.45 * range, hi + 0.05 * range);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("{} per session", metric.name()), ("sans-serif", 20))
+            .margin(14)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(1.0..sessions as f64, bottom..top)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("session with the child")
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.2}"))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(err)?;
+        for (i, (arm, c)) in curves.iter().enumerate() {
+            let points: Vec<(f64, f64, f64)> = c
+                .iter()
+                .enumerate()
+                .map(|(k, m)| ((k + 1) as f64, m.mean, m.std))
+                .collect();
+            draw_band(&mut chart, &points, COLOURS[i % COLOURS.len()], arm.name())?;
+        }
+        draw_legend(&mut chart)?;
+        Ok(())
+    })
 }
