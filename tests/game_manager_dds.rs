@@ -139,6 +139,142 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
 }
 
 #[test]
+fn proposals_to_the_therapist_are_accepted_replaced_or_run_out_over_dds() {
+    // Supervised autonomy with the shipped user models for the σ rule (its threshold above any
+    // σ: the policy's temperature alone decides what is proposed here).
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    write_params(d);
+    let models = workspace_root().join("nodes/user_model/models/migrave_study_c2.json");
+    let params = std::fs::read_to_string(d.join("game_manager.yaml")).expect("params");
+    let supervised = params
+        .replace("supervised_autonomy: false", "supervised_autonomy: true")
+        .replace(
+            "propose_above_success_std: 0.3",
+            "propose_above_success_std: 1.0",
+        )
+        // 2 s after time_scale.
+        .replace("proposal_countdown_s: 5.0", "proposal_countdown_s: 40.0")
+        .replace(
+            r#"user_model_file: "nodes/user_model/models/migrave_study_c2.json""#,
+            &format!("user_model_file: {:?}", models.display().to_string()),
+        );
+    assert!(
+        supervised.contains("supervised_autonomy: true")
+            && supervised.contains(&*models.to_string_lossy())
+    );
+    std::fs::write(d.join("game_manager.yaml"), supervised).expect("write params");
+    let script = format!(
+        r#"
+        export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR={d}
+        {gm} run --sessions-dir {d}/sessions >{d}/gm.out 2>{d}/gm.err &
+        G=$!
+        {peer} --session dds-sup --unsure 2,3,4,6 --proposal-replies accept,level3,wait,challenge \
+          >{d}/peer.out 2>{d}/peer.err
+        P=$?
+        kill -INT $G; wait $G; RC=$?
+        echo "{{\"peer\":$P,\"game_manager\":$RC}}"
+        "#,
+        d = d.display(),
+        gm = workspace_bin("game_manager").display(),
+        peer = env!("CARGO_BIN_EXE_game_manager_test_peer"),
+    );
+    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(200)) else {
+        return;
+    };
+    let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
+    let peer_out = read("peer.out");
+    let context = format!(
+        "script: {}\n{}\ngame_manager stderr:\n{}\npeer:\n{peer_out}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+        read("gm.err"),
+        read("peer.err")
+    );
+    let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
+    assert_eq!(
+        exit.last()
+            .map(|e| (e["peer"].clone(), e["game_manager"].clone())),
+        Some((0.into(), 0.into())),
+        "{context}"
+    );
+    let peer = json_lines(&peer_out);
+    let proposals: Vec<(i64, i64)> = peer
+        .iter()
+        .filter(|e| e["event"] == "proposal")
+        .filter_map(|e| Some((e["step"].as_i64()?, e["status"].as_i64()?)))
+        .collect();
+    // PROPOSED (0), then ACCEPTED (1), REPLACED (2), TIMED_OUT (3), REPLACED.
+    assert_eq!(
+        proposals,
+        vec![
+            (2, 0),
+            (2, 1),
+            (3, 0),
+            (3, 2),
+            (4, 0),
+            (4, 3),
+            (6, 0),
+            (6, 2)
+        ],
+        "{context}"
+    );
+    let all: Vec<&serde_json::Value> = peer.iter().filter(|e| e["event"] == "proposal").collect();
+    assert!(
+        all.iter()
+            .all(|p| p["success_std"].as_f64().is_some_and(|s| s >= 0.0)),
+        "the σ of the shipped user models is in every proposal: {context}"
+    );
+    assert_eq!(
+        (
+            all[3]["played_level"].clone(),
+            all[7]["played_feedback"].clone()
+        ),
+        (3.into(), 2.into()),
+        "{context}"
+    );
+    let results: Vec<&serde_json::Value> = peer.iter().filter(|e| e["event"] == "result").collect();
+    assert_eq!(results.len(), 10, "{context}");
+    let overridden: Vec<bool> = results
+        .iter()
+        .filter_map(|r| r["overridden"].as_bool())
+        .collect();
+    assert_eq!(
+        overridden,
+        vec![
+            false, false, true, false, false, true, false, false, false, false
+        ],
+        "{context}"
+    );
+    assert_eq!(results[2]["level"], 3, "{context}");
+    let records = read_records(&d.join("sessions/dds-sup.jsonl")).expect("session file");
+    assert!(
+        records.records[1]
+            .decision_reason
+            .contains("accepted by the therapist"),
+        "{context}"
+    );
+    assert!(
+        records.records[3]
+            .decision_reason
+            .contains("not answered within 2.0 s"),
+        "{context}"
+    );
+    let summary: SessionSummary =
+        serde_json::from_str(&read("sessions/dds-sup.summary.json")).expect("summary file");
+    assert_eq!(
+        (
+            summary.proposals,
+            summary.proposals_accepted,
+            summary.proposals_replaced,
+            summary.proposals_timed_out
+        ),
+        (4, 1, 2, 1),
+        "{context}"
+    );
+}
+
+#[test]
 fn a_killed_node_loses_no_scored_sequence_and_its_restart_goes_on_with_the_same_session() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();

@@ -457,8 +457,10 @@ impl GameDriver {
             Output::SetTimer { id, at_ns } => {
                 self.timers.insert((at_ns, id));
             }
-            // The sample sessions were recorded with the topics backend: no robot steps.
+            // The sample sessions were recorded with the topics backend (no robot steps) and
+            // without supervised autonomy (no proposals).
             Output::AwaitRobot { .. }
+            | Output::Proposal(_)
             | Output::Record(_)
             | Output::Journal(_)
             | Output::Summary(_)

@@ -77,6 +77,9 @@ ros_message! {
         STOP: u8 = 3,
         OVERRIDE_LEVEL: u8 = 4,
         EMERGENCY_STOP: u8 = 5,
+        OVERRIDE_ENCOURAGING: u8 = 6,
+        OVERRIDE_CHALLENGING: u8 = 7,
+        ACCEPT_PROPOSAL: u8 = 8,
     }
 }
 
@@ -206,5 +209,36 @@ ros_message! {
         pub node_name: String,
         pub pid: u32,
         pub sequence: u64,
+    }
+}
+
+ros_message! {
+    /// The policy's action offered to the therapist (supervised autonomy), and what became of it.
+    pub struct ActionProposal(PKG, "ActionProposal", include_str!("../msg/ActionProposal.msg")) {
+        pub header: Header,
+        pub session_id: String,
+        pub step: u8,
+        pub state: BehaviourState,
+        pub action: u8,
+        pub level: u8,
+        pub feedback: u8,
+        pub temperature: f64,
+        pub success_std: f64,
+        pub reason: String,
+        pub countdown: f32,
+        pub deadline: Time,
+        pub status: u8,
+        pub played_action: u8,
+        pub played_level: u8,
+        pub played_feedback: u8,
+        pub command_id: u64,
+        pub response_time: f32,
+    }
+    constants {
+        PROPOSED: u8 = 0,
+        ACCEPTED: u8 = 1,
+        REPLACED: u8 = 2,
+        TIMED_OUT: u8 = 3,
+        WITHDRAWN: u8 = 4,
     }
 }

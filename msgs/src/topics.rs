@@ -115,6 +115,10 @@ pub const THERAPIST_COMMAND: Topic<TherapistCommand> =
 pub const GAME_STATE: Topic<GameState> = Topic::new("/qt_therapy/game/state", QosKind::State);
 pub const SEQUENCE_RESULT: Topic<SequenceResult> =
     Topic::new("/qt_therapy/game/sequence_result", QosKind::Durable);
+/// Durable like results: the therapist page and the recorder get a proposal made while they
+/// were (re)connecting, and the bag keeps every response.
+pub const ACTION_PROPOSAL: Topic<ActionProposal> =
+    Topic::new("/qt_therapy/game/proposal", QosKind::Durable);
 pub const TABLET_TASK: Topic<TabletTask> = Topic::new("/qt_therapy/tablet/task", QosKind::State);
 pub const TABLET_ANSWER: Topic<TabletAnswer> =
     Topic::new("/qt_therapy/tablet/answer", QosKind::Reliable);
@@ -172,6 +176,7 @@ pub fn all_topics() -> Vec<TopicInfo> {
         THERAPIST_COMMAND.info(),
         GAME_STATE.info(),
         SEQUENCE_RESULT.info(),
+        ACTION_PROPOSAL.info(),
         TABLET_TASK.info(),
         TABLET_ANSWER.info(),
         DECISION.info(),

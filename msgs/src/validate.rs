@@ -196,13 +196,60 @@ impl Validate for TherapistCommand {
             "command",
             self.command,
             Self::START,
-            Self::EMERGENCY_STOP,
+            Self::ACCEPT_PROPOSAL,
         )?;
         check_id(M, "session_id", &self.session_id, true)?;
         check_id(M, "user_id", &self.user_id, self.command == Self::START)?;
         check_range(M, "user_model_cluster", self.user_model_cluster, -1, 63)?;
         if self.command == Self::OVERRIDE_LEVEL {
             check_range(M, "level", self.level, 1, 3)?;
+        }
+        Ok(())
+    }
+}
+
+impl Validate for ActionProposal {
+    fn validate(&self) -> Result<(), InvalidMessage> {
+        const M: &str = "ActionProposal";
+        check_id(M, "session_id", &self.session_id, true)?;
+        check_range(M, "step", self.step, 1, 10)?;
+        self.state
+            .validate()
+            .or_else(|e| fail(M, format!("state: {}", e.reason)))?;
+        check_range(M, "status", self.status, Self::PROPOSED, Self::WITHDRAWN)?;
+        check_range(M, "action", self.action, 0, 4)?;
+        check_range(M, "level", self.level, 1, 3)?;
+        check_range(M, "feedback", self.feedback, 0, 2)?;
+        // Settled and played: what played is an action too.
+        if matches!(
+            self.status,
+            Self::ACCEPTED | Self::REPLACED | Self::TIMED_OUT
+        ) {
+            check_range(M, "played_action", self.played_action, 0, 4)?;
+            check_range(M, "played_level", self.played_level, 1, 3)?;
+            check_range(M, "played_feedback", self.played_feedback, 0, 2)?;
+        }
+        if !(self.temperature.is_finite() && self.temperature > 0.0) {
+            return fail(
+                M,
+                format!("temperature {} is not positive", self.temperature),
+            );
+        }
+        if !(self.success_std.is_finite() && (self.success_std >= 0.0 || self.success_std == -1.0))
+        {
+            return fail(
+                M,
+                format!("success_std {} is not >= 0 or -1", self.success_std),
+            );
+        }
+        if !(self.countdown.is_finite() && self.countdown >= 0.0) {
+            return fail(M, format!("countdown {} is not >= 0", self.countdown));
+        }
+        if !(self.response_time.is_finite() && self.response_time >= 0.0) {
+            return fail(
+                M,
+                format!("response_time {} is not >= 0", self.response_time),
+            );
         }
         Ok(())
     }

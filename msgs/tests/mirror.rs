@@ -134,7 +134,8 @@ fn every_message_file_matches_its_rust_type() {
         TabletAnswer,
         Decision,
         UserModelInfo,
-        Heartbeat
+        Heartbeat,
+        ActionProposal
     );
     macro_rules! srv {
         ($($s:ty),*) => {$(
@@ -360,6 +361,26 @@ fn every_type_round_trips_through_cdr_exactly() {
         user_id: "03DEQR1O".into(),
         user_model_cluster: -1,
         level: 3,
+    });
+    round_trip(ActionProposal {
+        header: stamp(),
+        session_id: "s".into(),
+        step: 4,
+        state: state(),
+        action: 3,
+        level: 2,
+        feedback: 1,
+        temperature: 235.0,
+        success_std: 0.31,
+        reason: "state visited 13 times (T 235 > 100)".into(),
+        countdown: 5.0,
+        deadline: Time::from_nanos(1_700_000_005_000_000_000),
+        status: ActionProposal::REPLACED,
+        played_action: 2,
+        played_level: 3,
+        played_feedback: 0,
+        command_id: 9,
+        response_time: 2.5,
     });
     round_trip(GameState {
         header: stamp(),

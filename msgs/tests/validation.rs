@@ -123,3 +123,37 @@ fn a_result_knows_its_session_length_and_engagement_period() {
     };
     assert!(reason(&refused).contains("command_outcome"));
 }
+
+#[test]
+fn proposals_are_range_checked() {
+    let mut p = ActionProposal {
+        session_id: "s".into(),
+        step: 2,
+        state: BehaviourState {
+            level: 1,
+            feedback: 0,
+            previous_score: 1,
+        },
+        action: 1,
+        level: 2,
+        temperature: 250.0,
+        success_std: -1.0,
+        countdown: 5.0,
+        ..Default::default()
+    };
+    assert!(p.validate().is_ok(), "{:?}", p.validate());
+    p.step = 0;
+    assert!(reason(&p).contains("step = 0"));
+    p.step = 2;
+    p.success_std = -0.5;
+    assert!(reason(&p).contains("success_std -0.5"));
+    p.success_std = 0.2;
+    // Settled: what plays must be an action too.
+    p.status = ActionProposal::ACCEPTED;
+    assert!(reason(&p).contains("played_level = 0"));
+    p.played_action = 1;
+    p.played_level = 2;
+    assert!(p.validate().is_ok());
+    p.status = 5;
+    assert!(reason(&p).contains("status = 5"));
+}

@@ -3,8 +3,9 @@
 //! with the emotions the robot showed, or a wrong one, or nothing), a camera (one
 //! ExpectedEngagement per second) and the therapist (start, a duplicated start, an override;
 //! or, for a game manager that took over a session after a crash, the commands it had already
-//! carried out delivered again and a resume). It prints one JSON line per event. The real
-//! nodes live in their own crates.
+//! carried out delivered again and a resume; or, under supervised autonomy, the answers to
+//! the game manager's proposals). It prints one JSON line per event. The real nodes live in
+//! their own crates.
 
 use clap::Parser;
 use node_shell::{NoParameters, NodeShell, ShellOptions, header_now, now_nanos};
@@ -43,6 +44,14 @@ struct Cli {
     /// at the end of the session.
     #[arg(long)]
     emergency_stop_at: Option<u8>,
+    /// Steps whose decisions come from a hot state (temperature 250): the game manager, under
+    /// supervised autonomy, proposes them to the therapist.
+    #[arg(long, value_delimiter = ',')]
+    unsure: Vec<u8>,
+    /// The therapist's answer to the proposal of each listed step, in order: `accept`,
+    /// `level1`..`level3`, `encourage`, `challenge`, or `wait` (let it run out).
+    #[arg(long, value_delimiter = ',')]
+    proposal_replies: Vec<String>,
     #[command(flatten)]
     shell: ShellOptions,
 }
@@ -52,7 +61,7 @@ fn emit(v: serde_json::Value) {
 }
 
 /// Level 1 first; up after a success; encourage after a failure without feedback; else same.
-fn decide(r: &DecideActionRequest) -> DecideActionResponse {
+fn decide(r: &DecideActionRequest, unsure: &[u8]) -> DecideActionResponse {
     let s = &r.state;
     let (action, level, feedback) = if s.level == 0 {
         (0, 1, 0)
@@ -76,7 +85,7 @@ fn decide(r: &DecideActionRequest) -> DecideActionResponse {
             feedback,
             q_values: vec![0.1, 0.2, 0.3, 0.4, 0.5],
             probabilities: vec![0.2; 5],
-            temperature: 1.0,
+            temperature: if unsure.contains(&r.step) { 250.0 } else { 1.0 },
             explored: r.step.is_multiple_of(2),
             exploitation_only: false,
             model_used: "test peer rule".into(),
@@ -116,6 +125,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
     let mut speech = shell.subscribe(ROBOT_SPEECH, 256)?;
     let mut tasks = shell.subscribe(TABLET_TASK, 16)?;
     let mut results = shell.subscribe(SEQUENCE_RESULT, 16)?;
+    let mut proposals = shell.subscribe(ACTION_PROPOSAL, 16)?;
     let commands = shell.publisher(THERAPIST_COMMAND)?;
     let answers = shell.publisher(TABLET_ANSWER)?;
     let engagement = shell.publisher(EXPECTED_ENGAGEMENT)?;
@@ -220,7 +230,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
             }
             Some(call) = calls.recv() => {
                 emit(serde_json::json!({"event": "decision", "step": call.request.step}));
-                let response = decide(&call.request);
+                let response = decide(&call.request, &cli.unsure);
                 call.respond(response);
             }
             Some(s) = states.recv() => {
@@ -304,6 +314,34 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                 answers.send(a);
             }
             Some(r) = results.recv() => emit(result_event(&r)),
+            Some(p) = proposals.recv() => {
+                emit(serde_json::json!({"event": "proposal", "step": p.step, "status": p.status,
+                    "level": p.level, "played_level": p.played_level,
+                    "played_feedback": p.played_feedback, "command_id": p.command_id,
+                    "success_std": p.success_std, "countdown": p.countdown, "reason": p.reason}));
+                if p.status != ActionProposal::PROPOSED || p.session_id != cli.session {
+                    continue;
+                }
+                let k = cli.unsure.iter().position(|s| *s == p.step);
+                let reply = k.and_then(|k| cli.proposal_replies.get(k)).map(String::as_str);
+                let code = match reply {
+                    Some("accept") => Some((TherapistCommand::ACCEPT_PROPOSAL, 0)),
+                    Some("level1") => Some((TherapistCommand::OVERRIDE_LEVEL, 1)),
+                    Some("level2") => Some((TherapistCommand::OVERRIDE_LEVEL, 2)),
+                    Some("level3") => Some((TherapistCommand::OVERRIDE_LEVEL, 3)),
+                    Some("encourage") => Some((TherapistCommand::OVERRIDE_ENCOURAGING, 0)),
+                    Some("challenge") => Some((TherapistCommand::OVERRIDE_CHALLENGING, 0)),
+                    _ => None,
+                };
+                if let Some((code, level)) = code {
+                    let mut c = command(code, &cli.session, next_command_id);
+                    c.level = level;
+                    next_command_id += 1;
+                    emit(serde_json::json!({"event": "proposal_reply", "step": p.step,
+                        "command": code, "command_id": c.command_id}));
+                    commands.send(c);
+                }
+            }
         }
     }
 }

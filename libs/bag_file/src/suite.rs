@@ -44,6 +44,7 @@ pub fn for_each_suite_type<P: PerType>(per: &P) -> Vec<P::Made> {
         per.make::<TabletTask>(),
         per.make::<TabletAnswer>(),
         per.make::<Decision>(),
+        per.make::<ActionProposal>(),
         per.make::<UserModelInfo>(),
         per.make::<Heartbeat>(),
         per.make::<std_msgs::StringMsg>(),

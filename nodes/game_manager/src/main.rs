@@ -16,10 +16,10 @@ use game_manager::{GameManager, GameManagerParams, Input, LogLevel, Output};
 use node_shell::instance_lock::InstanceLock;
 use node_shell::{NodeShell, Outbox, ShellOptions, now_nanos};
 use qt_therapy_msgs::topics::{
-    DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_ANSWER,
-    TABLET_TASK, THERAPIST_COMMAND,
+    ACTION_PROPOSAL, DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
+    TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
 };
-use qt_therapy_msgs::{DecideAction, GameState, SequenceResult, TabletTask};
+use qt_therapy_msgs::{ActionProposal, DecideAction, GameState, SequenceResult, TabletTask};
 use robot::{Act, Robot};
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -53,6 +53,7 @@ struct Outboxes {
     task: Outbox<TabletTask>,
     state: Outbox<GameState>,
     result: Outbox<SequenceResult>,
+    proposal: Outbox<ActionProposal>,
 }
 
 #[tokio::main]
@@ -87,11 +88,32 @@ async fn run(
 ) -> anyhow::Result<()> {
     let mut core = GameManager::new(params.clone())
         .with_context(|| format!("parameter file {}", params_file.display()))?;
+    if params.supervised_autonomy && !params.user_model_file.is_empty() {
+        // The σ rule reads the same models as the policy; a file it cannot use is named.
+        let path = std::path::Path::new(&params.user_model_file);
+        let models = user_models::UserModelSet::load(path).with_context(|| {
+            format!(
+                "user_model_file (supervised autonomy's σ rule) in {}",
+                params_file.display()
+            )
+        })?;
+        tracing::info!(file = %path.display(), clusters = models.cluster_count(),
+            "supervised autonomy: proposing decisions above temperature {} or σ {}",
+            params.propose_above_temperature, params.propose_above_success_std);
+        core = core.with_user_models(models.tables());
+    } else if params.supervised_autonomy {
+        tracing::info!(
+            "supervised autonomy: proposing decisions above temperature {} (no user_model_file: \
+             no σ rule)",
+            params.propose_above_temperature
+        );
+    }
     let mut files = SessionFiles::new(&params.sessions_dir);
     let out = Outboxes {
         task: shell.publisher(TABLET_TASK)?,
         state: shell.publisher(GAME_STATE)?,
         result: shell.publisher(SEQUENCE_RESULT)?,
+        proposal: shell.publisher(ACTION_PROPOSAL)?,
     };
     let mut commands = shell.subscribe(THERAPIST_COMMAND, 64)?;
     let mut answers = shell.subscribe(TABLET_ANSWER, 64)?;
@@ -245,6 +267,9 @@ impl Dispatch<'_> {
                 }
                 Output::Result(r) => {
                     self.out.result.send(r);
+                }
+                Output::Proposal(p) => {
+                    self.out.proposal.send(p);
                 }
                 Output::Decide {
                     request_id,

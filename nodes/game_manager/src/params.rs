@@ -86,6 +86,19 @@ pub struct GameManagerParams {
     pub robot_call_timeout_s: f64,
     /// `qtrobot`, `qtrobot_ros2`: the gesture speed factor sent with every gesture.
     pub robot_gesture_speed: f64,
+    /// Supervised autonomy: a decision the policy is unsure of is proposed to the therapist
+    /// (ActionProposal) and played when accepted, replaced, or when its countdown runs out.
+    pub supervised_autonomy: bool,
+    /// A decision whose state's softmax temperature is above this is proposed (the
+    /// temperature falls with the state's visits: 300 unvisited, 0.5 after 60 visits).
+    pub propose_above_temperature: f64,
+    /// A decision whose user-model sigma of P(success) after the action is above this is
+    /// proposed (needs `user_model_file`).
+    pub propose_above_success_std: f64,
+    /// Seconds (before time_scale) the therapist has to answer a proposal.
+    pub proposal_countdown_s: f64,
+    /// The user models the sigma rule reads (the behaviour policy's file); "" turns it off.
+    pub user_model_file: String,
 }
 
 /// How the robot is driven (`robot_backend`).
@@ -179,6 +192,11 @@ impl Default for GameManagerParams {
             robot_backend: "topics".into(),
             robot_call_timeout_s: 60.0,
             robot_gesture_speed: 1.0,
+            supervised_autonomy: false,
+            propose_above_temperature: 100.0,
+            propose_above_success_std: 0.3,
+            proposal_countdown_s: 5.0,
+            user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
         }
     }
 }
@@ -314,6 +332,30 @@ impl GameManagerParams {
             3600.0,
         )?;
         seconds("robot_gesture_speed", self.robot_gesture_speed, 0.0, 10.0)?;
+        if !(self.propose_above_temperature.is_finite() && self.propose_above_temperature >= 0.0) {
+            return bad(
+                "propose_above_temperature",
+                format!(
+                    "{} is not a temperature >= 0",
+                    self.propose_above_temperature
+                ),
+            );
+        }
+        if !(self.propose_above_success_std.is_finite() && self.propose_above_success_std >= 0.0) {
+            return bad(
+                "propose_above_success_std",
+                format!(
+                    "{} is not a standard deviation >= 0",
+                    self.propose_above_success_std
+                ),
+            );
+        }
+        seconds(
+            "proposal_countdown_s",
+            self.proposal_countdown_s,
+            0.1,
+            3600.0,
+        )?;
         Ok(())
     }
 
@@ -438,6 +480,27 @@ mod tests {
                     ..Default::default()
                 },
                 "watched_nodes",
+            ),
+            (
+                GameManagerParams {
+                    propose_above_temperature: -1.0,
+                    ..Default::default()
+                },
+                "propose_above_temperature",
+            ),
+            (
+                GameManagerParams {
+                    propose_above_success_std: f64::INFINITY,
+                    ..Default::default()
+                },
+                "propose_above_success_std",
+            ),
+            (
+                GameManagerParams {
+                    proposal_countdown_s: 0.0,
+                    ..Default::default()
+                },
+                "proposal_countdown_s",
             ),
         ];
         for (p, key) in cases {

@@ -5,8 +5,8 @@
 
 use crate::session_file::{JournalEntry, SequenceRecord, SessionSummary};
 use qt_therapy_msgs::{
-    DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState, Heartbeat,
-    SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
+    ActionProposal, DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState,
+    Heartbeat, SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
 };
 
 /// One event for the core.
@@ -58,6 +58,8 @@ pub enum Output {
     },
     Task(TabletTask),
     State(GameState),
+    /// A proposal to the therapist, or what became of it (supervised autonomy).
+    Proposal(ActionProposal),
     Result(SequenceResult),
     /// Call DecideAction; the core falls back on its own at `deadline_ns`.
     Decide {

@@ -6,6 +6,7 @@
 
 use crate::session_file::{JournalCommand, JournalEntry, SequenceRecord};
 use qt_therapy_msgs::Validate;
+use sequence_game::{Action, Feedback, Level};
 use serde::de::DeserializeOwned;
 use std::collections::BTreeMap;
 
@@ -24,8 +25,8 @@ pub struct RecoveredSession {
     pub last_command_id: u64,
     /// Highest tablet task id possibly sent; the next task gets a higher one.
     pub last_task_id: u32,
-    /// (sequence index, level) of an override the therapist set and no sequence used yet.
-    pub pending_override: Option<(u8, u8)>,
+    /// (sequence index, action) of an override the therapist set and no sequence used yet.
+    pub pending_override: Option<(u8, Action)>,
     /// Message time of the last thing the files record.
     pub last_activity_ns: i64,
     /// Each damaged, skipped or doubtful line, named with its file and line number.
@@ -209,15 +210,27 @@ pub fn recover_session(
                 command_id,
                 command,
                 level,
+                feedback,
                 sequence_index,
                 ..
             } => {
                 last_command_id = last_command_id.max(*command_id);
-                if *command == JournalCommand::OverrideLevel
-                    && let (Some(level), Some(index)) = (level, sequence_index)
-                {
+                let action = match (command, level, feedback) {
+                    (JournalCommand::OverrideLevel, Some(l), _) => {
+                        Level::new((*l).into()).ok().map(Action::SetLevel)
+                    }
+                    (JournalCommand::OverrideFeedback, _, Some(f)) => {
+                        match Feedback::new((*f).into()) {
+                            Ok(Feedback::Encouraging) => Some(Action::Encourage),
+                            Ok(Feedback::Challenging) => Some(Action::Challenge),
+                            _ => None,
+                        }
+                    }
+                    _ => None,
+                };
+                if let (Some(action), Some(index)) = (action, sequence_index) {
                     // One override slot, as in the core: the last one set counts.
-                    pending_override = Some((*index, *level));
+                    pending_override = Some((*index, action));
                 }
             }
             JournalEntry::Task { task_id, .. } => last_task_id = last_task_id.max(*task_id),

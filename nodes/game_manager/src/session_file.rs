@@ -36,6 +36,9 @@ pub enum JournalCommand {
     Pause,
     Resume,
     OverrideLevel,
+    /// Encouraging or challenging feedback for a sequence (its `feedback`).
+    OverrideFeedback,
+    AcceptProposal,
 }
 
 /// One line of `<session>.journal`: what the session file alone cannot tell a restarted node.
@@ -55,9 +58,12 @@ pub enum JournalEntry {
         session_id: String,
         command_id: u64,
         command: JournalCommand,
-        /// An override's level and the sequence it is for.
+        /// An override's level or feedback (1 encouraging, 2 challenging) and the sequence
+        /// it is for.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         level: Option<u8>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        feedback: Option<u8>,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         sequence_index: Option<u8>,
         at_ns: i64,
@@ -129,6 +135,17 @@ pub struct SessionSummary {
     /// Mean of the sequences' E over sequences with engagement data.
     pub mean_engagement: Option<f64>,
     pub overrides: u32,
+    /// Supervised autonomy: decisions proposed to the therapist, and how many of them were
+    /// accepted, replaced by the therapist's choice, or played when the countdown ran out
+    /// (0 in files written before proposals existed).
+    #[serde(default)]
+    pub proposals: u32,
+    #[serde(default)]
+    pub proposals_accepted: u32,
+    #[serde(default)]
+    pub proposals_replaced: u32,
+    #[serde(default)]
+    pub proposals_timed_out: u32,
     pub policy_fallbacks: u32,
     pub rejected_commands: u32,
     pub rejected_answers: u32,
@@ -529,6 +546,10 @@ mod tests {
             max_score: 2,
             mean_engagement: None,
             overrides: 0,
+            proposals: 0,
+            proposals_accepted: 0,
+            proposals_replaced: 0,
+            proposals_timed_out: 0,
             policy_fallbacks: 0,
             rejected_commands: 0,
             rejected_answers: 0,

@@ -215,6 +215,30 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
         },
     );
     s.put(
+        ACTION_PROPOSAL,
+        50,
+        ActionProposal {
+            header: header(50),
+            session_id: session_id.clone(),
+            step: 1,
+            state: state.clone(),
+            action: 0,
+            level: 1,
+            feedback: 0,
+            temperature: 300.0,
+            success_std: 0.34,
+            reason: "the state is little visited (temperature 300.0 > 100)".into(),
+            countdown: 5.0,
+            deadline: Time::from_nanos(5_050_000_000),
+            status: ActionProposal::ACCEPTED,
+            played_action: 0,
+            played_level: 1,
+            played_feedback: 0,
+            command_id: 2,
+            response_time: 1.5,
+        },
+    );
+    s.put(
         GAME_STATE,
         60,
         game(GameState::SAYING_SEQUENCE, "saying the sequence"),

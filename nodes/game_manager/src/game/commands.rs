@@ -4,12 +4,13 @@
 //! running session is honoured even with an out-of-order id: silencing the robot is never
 //! the unsafe choice.
 
-use super::{CommandAnswer, Current, GameManager, Phase, Session, Timer};
+use super::propose::Settled;
+use super::{CommandAnswer, Current, GameManager, PendingOverride, Phase, Session, Timer};
 use crate::protocol::{LogLevel, Output};
 use crate::sequence::SessionRng;
 use crate::session_file::{JournalCommand, JournalEntry, SessionEnd};
 use qt_therapy_msgs::{GameState, TherapistCommand};
-use sequence_game::{Level, State};
+use sequence_game::{Action, Feedback, Level, State};
 
 fn command_name(code: u8) -> &'static str {
     match code {
@@ -19,6 +20,9 @@ fn command_name(code: u8) -> &'static str {
         TherapistCommand::STOP => "stop",
         TherapistCommand::OVERRIDE_LEVEL => "override level",
         TherapistCommand::EMERGENCY_STOP => "emergency stop",
+        TherapistCommand::OVERRIDE_ENCOURAGING => "override: encouraging feedback",
+        TherapistCommand::OVERRIDE_CHALLENGING => "override: challenging feedback",
+        TherapistCommand::ACCEPT_PROPOSAL => "accept proposal",
         _ => "unknown",
     }
 }
@@ -95,13 +99,30 @@ impl GameManager {
                 &format!("stopped by the therapist (command {})", c.command_id),
                 now,
             ),
-            _ => self.override_level(c.level, c.command_id, now),
+            TherapistCommand::ACCEPT_PROPOSAL => {
+                self.journal_command(c.command_id, JournalCommand::AcceptProposal, None, now);
+                let accepted = Settled::Accepted {
+                    command_id: c.command_id,
+                };
+                self.settle_proposal(accepted, None, now);
+            }
+            code => {
+                let action = match code {
+                    TherapistCommand::OVERRIDE_ENCOURAGING => Action::Encourage,
+                    TherapistCommand::OVERRIDE_CHALLENGING => Action::Challenge,
+                    _ => match Level::new(c.level.into()) {
+                        Ok(level) => Action::SetLevel(level),
+                        Err(_) => return,
+                    },
+                };
+                self.override_action(action, c.command_id, now)
+            }
         }
     }
 
     /// Why a command cannot be carried out now, if it cannot.
     fn check_command(&self, c: &TherapistCommand) -> Result<(), Refusal> {
-        if c.command > TherapistCommand::EMERGENCY_STOP {
+        if c.command > TherapistCommand::ACCEPT_PROPOSAL {
             return refuse(format!("unknown command code {}", c.command));
         }
         if c.session_id.is_empty() {
@@ -171,6 +192,19 @@ impl GameManager {
                 }
                 Ok(())
             }
+            TherapistCommand::OVERRIDE_ENCOURAGING | TherapistCommand::OVERRIDE_CHALLENGING => {
+                let target = self.override_target();
+                if target > self.sequences() {
+                    return refuse("no sequence is left to override");
+                }
+                if target == 1 {
+                    return refuse("feedback needs a sequence before it: not on the first");
+                }
+                Ok(())
+            }
+            TherapistCommand::ACCEPT_PROPOSAL if self.open_proposal().is_none() => {
+                refuse("no proposal is open (one that ran out was played)")
+            }
             _ => Ok(()),
         }
     }
@@ -199,23 +233,30 @@ impl GameManager {
     }
 
     /// Journals a command carried out (before its effect is published), so a restarted node
-    /// never carries out its id again.
+    /// never carries out its id again; an override with its sequence and action.
     fn journal_command(
         &mut self,
         command_id: u64,
         command: JournalCommand,
-        over: Option<(u8, Level)>,
+        over: Option<(u8, Action)>,
         now: i64,
     ) {
         let Some(s) = self.session.as_ref() else {
             return;
+        };
+        let (level, feedback) = match over.map(|(_, a)| a) {
+            Some(Action::SetLevel(l)) => (Some(l.get()), None),
+            Some(Action::Encourage) => (None, Some(Feedback::Encouraging as u8)),
+            Some(Action::Challenge) => (None, Some(Feedback::Challenging as u8)),
+            None => (None, None),
         };
         self.out
             .push(Output::Journal(Box::new(JournalEntry::Command {
                 session_id: s.id.clone(),
                 command_id,
                 command,
-                level: over.map(|(_, l)| l.get()),
+                level,
+                feedback,
                 sequence_index: over.map(|(i, _)| i),
                 at_ns: now,
             })));
@@ -252,6 +293,7 @@ impl GameManager {
             closed_task: None,
             fallbacks: 0,
             overrides: 0,
+            proposals: Default::default(),
             rejected_commands: 0,
             rejected_answers: 0,
         });
@@ -303,6 +345,8 @@ impl GameManager {
                 self.drop_timers(|t| *t != Timer::AnswerTimeout);
                 self.current.answer_left_ns = Some((self.current.answer_deadline_ns - now).max(0));
             }
+            // Nobody can answer a proposal while the game stands still.
+            Phase::Deciding => self.stop_countdown(),
             _ => {}
         }
     }
@@ -351,7 +395,9 @@ impl GameManager {
                 // at recovery, when the policy may not be up), a request that ran out while
                 // the session was held or paused, or one still pending, which may have gone
                 // to a policy that died meanwhile (its answer, if any, is then superseded).
-                if self.phase == Phase::Deciding && self.current.plan.is_none() {
+                if self.phase == Phase::Deciding && self.current.proposal.is_some() {
+                    self.start_countdown(now);
+                } else if self.phase == Phase::Deciding && self.current.plan.is_none() {
                     self.ask_policy_again("the session goes on", now);
                 }
                 self.maybe_present(now);
@@ -359,28 +405,34 @@ impl GameManager {
         }
     }
 
-    fn override_level(&mut self, level: u8, command_id: u64, now: i64) {
-        let Ok(level) = Level::new(level.into()) else {
-            return;
-        };
+    /// The therapist sets the next sequence's level or feedback (replacing a proposal open
+    /// for it).
+    fn override_action(&mut self, action: Action, command_id: u64, now: i64) {
         let target = self.override_target();
-        self.journal_command(
-            command_id,
-            JournalCommand::OverrideLevel,
-            Some((target, level)),
-            now,
-        );
+        let kind = match action {
+            Action::SetLevel(_) => JournalCommand::OverrideLevel,
+            _ => JournalCommand::OverrideFeedback,
+        };
+        self.journal_command(command_id, kind, Some((target, action)), now);
         if let Some(s) = self.session.as_mut() {
-            s.pending_override = Some((target, level));
+            s.pending_override = Some(PendingOverride {
+                sequence_index: target,
+                action,
+                command_id,
+            });
         }
+        let what = match action {
+            Action::SetLevel(level) => format!("set to {level}"),
+            Action::Encourage => "given encouraging feedback".into(),
+            Action::Challenge => "given challenging feedback".into(),
+        };
         self.log(
             LogLevel::INFO,
-            format!("sequence {target} set to {level} by the therapist"),
+            format!("sequence {target} {what} by the therapist"),
         );
         // Every accepted command's first state names it: the console waits for that.
-        self.status = format!(
-            "next sequence ({target}) set to {level} by the therapist (command {command_id})"
-        );
+        self.status =
+            format!("next sequence ({target}) {what} by the therapist (command {command_id})");
         self.publish_state(now);
         if self.phase == Phase::Deciding {
             self.apply_override(now);

@@ -2,6 +2,7 @@
 //! decision if it comes in time and fits the state, else the safe fallback (same level, no
 //! feedback; level 1 on the first sequence).
 
+use super::propose::{Settled, action_words};
 use super::{GameManager, Phase, Plan, PolicySilence, Timer};
 use crate::protocol::{LogLevel, Output};
 use qt_therapy_msgs::live_line::decision_reason;
@@ -44,31 +45,53 @@ impl GameManager {
         self.set_timer(Timer::PolicyDeadline { request_id }, deadline_ns);
     }
 
-    /// Uses a pending override for the current sequence; true if there was one.
+    /// Uses a pending override for the current sequence (replacing a proposal open for it);
+    /// true if there was one.
     pub(super) fn apply_override(&mut self, now: i64) -> bool {
         let Some(s) = self.session.as_mut() else {
             return false;
         };
-        let Some((index, level)) = s.pending_override else {
+        let Some(o) = s.pending_override else {
             return false;
         };
-        if index != s.index {
+        if o.sequence_index != s.index {
             return false;
         }
         s.pending_override = None;
+        let index = s.index;
+        let Some((level, feedback)) = o.action.apply(s.state) else {
+            // Checked when the command came; a recovered journal may still hold one.
+            let state = s.state;
+            self.log(
+                LogLevel::WARN,
+                format!(
+                    "sequence {index}: the therapist's {} cannot be played in state {state}: \
+                     the policy decides",
+                    o.action
+                ),
+            );
+            return false;
+        };
         s.overrides += 1;
         // A policy answer still on its way is ignored: the override always wins.
         self.current.request_id = None;
-        self.current.plan = Some(Plan {
-            action: Action::SetLevel(level),
+        let plan = Plan {
+            action: o.action,
             level,
-            feedback: Feedback::None,
+            feedback,
             overridden: true,
             fallback: false,
             reason: "therapist override".into(),
-        });
-        self.status = format!("sequence {index}: {level} set by the therapist");
-        self.publish_state(now);
+        };
+        let words = action_words(level, feedback);
+        let replaced = Settled::Replaced {
+            command_id: o.command_id,
+        };
+        if !self.settle_proposal(replaced, Some(plan.clone()), now) {
+            self.current.plan = Some(plan);
+            self.status = format!("sequence {index}: {words} set by the therapist");
+            self.publish_state(now);
+        }
         true
     }
 
@@ -88,13 +111,12 @@ impl GameManager {
         self.current.request_id = None;
         let plan = match response {
             Err(reason) => Err(format!("policy call failed: {reason}")),
-            Ok(r) => self.plan_from_decision(&r),
+            Ok(r) => self
+                .plan_from_decision(&r)
+                .map(|plan| (plan, r.decision.temperature)),
         };
         match plan {
-            Ok(plan) => {
-                self.current.plan = Some(plan);
-                self.maybe_present(now);
-            }
+            Ok((plan, temperature)) => self.take_policy_plan(plan, temperature, now),
             Err(reason) => self.fall_back(reason, now),
         }
     }
@@ -204,6 +226,7 @@ impl GameManager {
             && !self.paused()
             && self.phase == Phase::Deciding
             && self.current.plan.is_none()
+            && self.current.proposal.is_none()
         {
             self.ask_policy_again("the policy is heard again", now);
         }

@@ -3,12 +3,14 @@
 //! sequence -> tablet task -> answer or timeout -> score with engagement -> next, x omega.
 //! The therapist can start, pause, resume, stop, override the next level or emergency-stop.
 //! A watched node that stops its heartbeat holds the session, with the robot silent. A
-//! session a killed node left unfinished is taken over, paused (`recover`).
+//! session a killed node left unfinished is taken over, paused (`recover`). A decision the
+//! policy is unsure of is proposed to the therapist first (`propose`).
 
 mod commands;
 mod decide;
 mod outcome;
 mod present;
+mod propose;
 mod recover;
 #[cfg(test)]
 mod tests;
@@ -26,7 +28,7 @@ use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::sequence_engagement::EngagementLog;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
-use sequence_game::{Action, Emotion, Feedback, Level, State};
+use sequence_game::{Action, Emotion, Feedback, Level, State, UserModelTable};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Where the game is (the GameState phase follows from it, PAUSED aside).
@@ -60,6 +62,8 @@ enum Timer {
     SequenceSaid,
     AnswerTimeout,
     Settled,
+    /// The open proposal's countdown ran out.
+    ProposalRunsOut,
 }
 
 /// The action chosen for the current sequence, and why.
@@ -91,6 +95,8 @@ struct Current {
     /// keeps missing deadlines cannot postpone the fallback for ever.
     policy_silence: PolicySilence,
     plan: Option<Plan>,
+    /// The policy's plan, waiting for the therapist (supervised autonomy).
+    proposal: Option<propose::OpenProposal>,
     speech_done: bool,
     feedback_line: Option<usize>,
     sequence: Vec<Emotion>,
@@ -120,8 +126,8 @@ struct Session {
     /// 1-based index of the current sequence.
     index: u8,
     next_sequence_id: u32,
-    /// (sequence index, level) the therapist set.
-    pending_override: Option<(u8, Level)>,
+    /// The action the therapist set for a sequence.
+    pending_override: Option<PendingOverride>,
     paused_since: Option<i64>,
     /// Held since then because a watched node is lost (a pause the therapist did not ask for).
     held_since: Option<i64>,
@@ -133,8 +139,27 @@ struct Session {
     closed_task: Option<(u32, bool)>,
     fallbacks: u32,
     overrides: u32,
+    proposals: ProposalCounts,
     rejected_commands: u32,
     rejected_answers: u32,
+}
+
+/// An override waiting for its sequence's decision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct PendingOverride {
+    sequence_index: u8,
+    action: Action,
+    /// The command that set it (0: from a recovered journal): a proposal it replaces names it.
+    command_id: u64,
+}
+
+/// What became of a session's proposals.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct ProposalCounts {
+    proposed: u32,
+    accepted: u32,
+    replaced: u32,
+    timed_out: u32,
 }
 
 /// The game manager core.
@@ -163,6 +188,8 @@ pub struct GameManager {
     /// The robot step under way and what follows it.
     robot_step: Option<(u64, Timer)>,
     next_robot_step: u64,
+    /// The user models' tables the σ rule of supervised autonomy reads (empty: rule off).
+    user_models: Vec<UserModelTable>,
     out: Vec<Output>,
 }
 
@@ -203,6 +230,7 @@ impl GameManager {
             robot_waits,
             robot_step: None,
             next_robot_step: 1,
+            user_models: Vec::new(),
             out: Vec::new(),
         })
     }

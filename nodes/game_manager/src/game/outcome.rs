@@ -191,6 +191,7 @@ impl GameManager {
             let act = self.utterances.goodbye();
             self.act(act);
         }
+        self.withdraw_proposal(now);
         self.timers.clear();
         self.robot_step = None;
         self.current = Current::default();
@@ -215,6 +216,10 @@ impl GameManager {
             max_score: tally.max_score,
             mean_engagement: tally.mean_engagement,
             overrides: s.overrides,
+            proposals: s.proposals.proposed,
+            proposals_accepted: s.proposals.accepted,
+            proposals_replaced: s.proposals.replaced,
+            proposals_timed_out: s.proposals.timed_out,
             policy_fallbacks: s.fallbacks,
             rejected_commands: s.rejected_commands,
             rejected_answers: s.rejected_answers,

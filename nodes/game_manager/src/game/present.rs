@@ -154,6 +154,7 @@ impl GameManager {
                 self.close_task(now);
             }
             Timer::Settled => self.finalize(now, true),
+            Timer::ProposalRunsOut => self.on_proposal_runs_out(now),
         }
     }
 }

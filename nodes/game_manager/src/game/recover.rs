@@ -5,7 +5,7 @@
 //! state (L, F, PS), the command ids carried out and the task ids sent carry over, so nothing
 //! is played, scored or carried out twice.
 
-use super::{Current, GameManager, Phase, Session};
+use super::{Current, GameManager, PendingOverride, Phase, Session};
 use crate::protocol::{LogLevel, Output};
 use crate::recovery::RecoveredSession;
 use crate::sequence::SessionRng;
@@ -47,9 +47,11 @@ impl GameManager {
             })
             .unwrap_or(State::START);
         let rng = self.replayed_rng(&r);
-        let pending_override = r
-            .pending_override
-            .and_then(|(i, l)| Level::new(l.into()).ok().map(|l| (i, l)));
+        let pending_override = r.pending_override.map(|(i, action)| PendingOverride {
+            sequence_index: i,
+            action,
+            command_id: 0,
+        });
         let results: Vec<_> = r.records.iter().map(|x| x.result.clone()).collect();
         self.used_sessions.insert(r.session_id.clone());
         self.engagement.clear();
@@ -76,6 +78,8 @@ impl GameManager {
             closed_task: None,
             fallbacks: r.records.iter().filter(|x| x.policy_fallback).count() as u32,
             overrides: results.iter().filter(|x| x.overridden).count() as u32,
+            // Only the session file's records come back; proposals live in the bag.
+            proposals: Default::default(),
             rejected_commands: 0,
             rejected_answers: r.records.iter().map(|x| x.rejected_answers).sum(),
             results,

@@ -4,6 +4,7 @@ mod answers;
 mod commands;
 mod harness;
 mod heartbeats;
+mod proposals;
 mod recovery;
 mod robot;
 mod session;

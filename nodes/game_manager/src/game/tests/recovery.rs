@@ -10,6 +10,7 @@ use crate::protocol::Output;
 use crate::recovery::{RecoveredSession, choose, recover_session};
 use crate::session_file::{JournalCommand, JournalEntry, SessionEnd, SessionFiles};
 use qt_therapy_msgs::{GameState, SequenceResult, TherapistCommand as C};
+use sequence_game::{Action, Level};
 
 fn child() -> Box<dyn FnMut(&qt_therapy_msgs::TabletTask) -> ChildReply> {
     scripted_child(vec![(3, ChildReply::Wrong { after_s: 7.0 })])
@@ -85,7 +86,7 @@ fn a_killed_session_comes_back_paused_and_goes_on_as_if_never_interrupted() {
             r.pending_override,
             r.started_ns,
         ),
-        (4, 5, 4, 5, Some((6, 1)), T0)
+        (4, 5, 4, 5, Some((6, Action::SetLevel(Level::ONE))), T0)
     );
     assert!(r.damage.is_empty(), "{:?}", r.damage);
     assert_eq!(r.user_id, "child-1");
@@ -482,4 +483,52 @@ fn the_newest_recent_unfinished_session_is_taken_over_and_the_others_left() {
         resume,
         Some(JournalEntry::Command { command_id: 4, .. })
     ));
+}
+
+#[test]
+fn a_feedback_override_set_before_the_crash_survives_it() {
+    let mut h = Harness::new(
+        GameManagerParams::default(),
+        rule_policy(),
+        scripted_child(vec![]),
+    );
+    h.start("s");
+    h.run_until(T0 + 15 * S); // sequence 1 waits for its answer
+    h.feed(cmd(C::OVERRIDE_CHALLENGING, "s", 2));
+    let r = recovered(&h);
+    assert_eq!(r.pending_override, Some((2, Action::Challenge)));
+    assert_eq!(r.last_command_id, 2);
+    // Taken over: sequence 2 gets the challenge once the therapist resumes.
+    h.run(3600.0);
+    let whole = h.results();
+    let mut again = Harness::recovering(
+        GameManagerParams::default(),
+        rule_policy(),
+        scripted_child(vec![]),
+        recovered_after_first(&whole),
+        T0 + 100 * S,
+    );
+    again.feed(cmd(C::RESUME, "s", 3));
+    again.run(3600.0);
+    let r2 = &again.results()[0];
+    assert_eq!(
+        (r2.sequence_index, r2.action, r2.feedback, r2.overridden),
+        (2, 4, 2, true)
+    );
+}
+
+/// The files of a session killed right after its first sequence was scored, with the
+/// challenge for sequence 2 journalled.
+fn recovered_after_first(whole: &[SequenceResult]) -> RecoveredSession {
+    let mut h = Harness::new(
+        GameManagerParams::default(),
+        rule_policy(),
+        scripted_child(vec![]),
+    );
+    h.start("s");
+    h.run_until(T0 + 15 * S);
+    h.feed(cmd(C::OVERRIDE_CHALLENGING, "s", 2));
+    h.run_until_true(60.0, |h| !h.results().is_empty());
+    assert_eq!(h.results()[0], whole[0]);
+    recovered(&h)
 }

@@ -1,0 +1,288 @@
+//! Supervised autonomy (as SPARC does): a decision the policy is unsure of, because its state
+//! is still hot (temperature above a parameter: few visits) or the user model's σ of
+//! P(success) after the action is above a parameter, is proposed to the therapist with a
+//! countdown. Accepted, or run out, it plays; an override replaces it; the session's end
+//! withdraws it. Each step is published (ActionProposal) for the page and the bag, and the
+//! response goes into the sequence's record with the decision's reason. The countdown stops
+//! while the session is paused or held and starts again, whole, on resume.
+
+use super::{GameManager, Phase, Plan, Timer};
+use crate::protocol::{LogLevel, Output};
+use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::{ActionProposal, BehaviourState};
+use sequence_game::{Action, Feedback, Level, ModelInput, UserModelTable};
+
+/// A proposal waiting for the therapist.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct OpenProposal {
+    plan: Plan,
+    /// As last published (PROPOSED).
+    message: ActionProposal,
+    proposed_ns: i64,
+    /// Its countdown runs (a timer is set) until then; None while paused or held.
+    deadline_ns: Option<i64>,
+}
+
+/// Why the policy is unsure of a decision.
+struct Unsure {
+    temperature: f64,
+    success_std: Option<f64>,
+    reason: String,
+}
+
+/// What became of a proposal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Settled {
+    Accepted { command_id: u64 },
+    Replaced { command_id: u64 },
+    TimedOut,
+}
+
+/// An action in the therapist's words: "level 2", "level 2 with encouraging feedback".
+pub(super) fn action_words(level: Level, feedback: Feedback) -> String {
+    match feedback {
+        Feedback::None => format!("level {}", level.get()),
+        f => format!("level {} with {} feedback", level.get(), f.name()),
+    }
+}
+
+impl GameManager {
+    /// Loads the user models' tables for the σ rule (`user_model_file`, read by the shell).
+    pub fn with_user_models(mut self, tables: Vec<UserModelTable>) -> Self {
+        self.user_models = tables;
+        self
+    }
+
+    /// The σ of F^p at the state the action leads to, for the session's cluster; the largest
+    /// over the clusters when the cluster is unknown (-1, or not in the file): not knowing
+    /// the child is a reason for caution. None without user models.
+    fn success_std(&self, level: Level, feedback: Feedback, previous_score: i8) -> Option<f64> {
+        let input = ModelInput::new(level, feedback, previous_score).ok()?;
+        let cluster = self.session.as_ref().map_or(-1, |s| s.cluster);
+        let own = usize::try_from(cluster)
+            .ok()
+            .and_then(|c| self.user_models.iter().find(|t| t.cluster == c));
+        match own {
+            Some(t) => Some(t.success(input).std),
+            None => self
+                .user_models
+                .iter()
+                .map(|t| t.success(input).std)
+                .reduce(f64::max),
+        }
+    }
+
+    fn unsure(&self, plan: &Plan, temperature: f64) -> Option<Unsure> {
+        if !self.params.supervised_autonomy {
+            return None;
+        }
+        let previous_score = self.session.as_ref()?.state.previous_score;
+        let success_std = self.success_std(plan.level, plan.feedback, previous_score);
+        let mut reasons = Vec::new();
+        let t_max = self.params.propose_above_temperature;
+        if temperature > t_max {
+            reasons.push(format!(
+                "the state is little visited (temperature {temperature:.1} > {t_max})"
+            ));
+        }
+        let s_max = self.params.propose_above_success_std;
+        if let Some(std) = success_std.filter(|s| *s > s_max) {
+            reasons.push(format!(
+                "the user model is unsure of success (σ {std:.2} > {s_max})"
+            ));
+        }
+        (!reasons.is_empty()).then(|| Unsure {
+            temperature,
+            success_std,
+            reason: reasons.join(" and "),
+        })
+    }
+
+    /// The policy's plan for the current sequence: played at once when the policy is sure of
+    /// it, else proposed to the therapist.
+    pub(super) fn take_policy_plan(&mut self, plan: Plan, temperature: f64, now: i64) {
+        match self.unsure(&plan, temperature) {
+            None => {
+                self.current.plan = Some(plan);
+                self.maybe_present(now);
+            }
+            Some(unsure) => self.propose(plan, unsure, now),
+        }
+    }
+
+    fn propose(&mut self, plan: Plan, unsure: Unsure, now: i64) {
+        let Some(s) = self.session.as_ref() else {
+            return;
+        };
+        let countdown_ns = self.scaled_ns(self.params.proposal_countdown_s);
+        let message = ActionProposal {
+            header: Header::at(Time::from_nanos(now)),
+            session_id: s.id.clone(),
+            step: s.index,
+            state: BehaviourState::from_state(s.state),
+            action: plan.action.index() as u8,
+            level: plan.level.get(),
+            feedback: plan.feedback as u8,
+            temperature: unsure.temperature,
+            success_std: unsure.success_std.unwrap_or(-1.0),
+            reason: unsure.reason,
+            countdown: (countdown_ns as f64 * 1e-9) as f32,
+            status: ActionProposal::PROPOSED,
+            ..Default::default()
+        };
+        let index = s.index;
+        if let Some(s) = self.session.as_mut() {
+            s.proposals.proposed += 1;
+        }
+        self.out.push(Output::LiveLine(format!(
+            "sequence {index}: the policy is unsure ({}): {} proposed to the therapist",
+            message.reason,
+            action_words(plan.level, plan.feedback)
+        )));
+        self.current.proposal = Some(OpenProposal {
+            plan,
+            message,
+            proposed_ns: now,
+            deadline_ns: None,
+        });
+        if self.paused() {
+            // Shown when the session goes on: a countdown nobody can act on is no choice.
+            self.log(
+                LogLevel::INFO,
+                format!("sequence {index}: the proposal waits for the session to go on"),
+            );
+        } else {
+            self.start_countdown(now);
+        }
+    }
+
+    /// Starts (or starts again, on resume) the open proposal's countdown and shows it.
+    pub(super) fn start_countdown(&mut self, now: i64) {
+        let countdown_ns = self.scaled_ns(self.params.proposal_countdown_s);
+        let index = self.session.as_ref().map_or(0, |s| s.index);
+        let Some(p) = self.current.proposal.as_mut() else {
+            return;
+        };
+        let deadline = now + countdown_ns;
+        p.deadline_ns = Some(deadline);
+        p.message.header = Header::at(Time::from_nanos(now));
+        p.message.deadline = Time::from_nanos(deadline);
+        let message = p.message.clone();
+        let words = action_words(p.plan.level, p.plan.feedback);
+        self.out.push(Output::Proposal(message.clone()));
+        self.set_timer(Timer::ProposalRunsOut, deadline);
+        self.status = format!(
+            "sequence {index}: proposing {words} to the therapist ({}); played in {:.1} s \
+             unless accepted or replaced",
+            message.reason, message.countdown
+        );
+        self.publish_state(now);
+    }
+
+    /// Stops the open proposal's countdown for a pause or a hold.
+    pub(super) fn stop_countdown(&mut self) {
+        if let Some(p) = self.current.proposal.as_mut() {
+            p.deadline_ns = None;
+        }
+        self.drop_timers(|t| *t != Timer::ProposalRunsOut);
+    }
+
+    /// The countdown ran out: the proposal plays.
+    pub(super) fn on_proposal_runs_out(&mut self, now: i64) {
+        let running = self
+            .current
+            .proposal
+            .as_ref()
+            .is_some_and(|p| p.deadline_ns.is_some_and(|d| d <= now));
+        if running && self.phase == Phase::Deciding {
+            self.settle_proposal(Settled::TimedOut, None, now);
+        }
+    }
+
+    /// Settles the open proposal: `played` is the plan that replaces it (None: it plays
+    /// itself). Returns false when none was open.
+    pub(super) fn settle_proposal(&mut self, how: Settled, played: Option<Plan>, now: i64) -> bool {
+        let Some(open) = self.current.proposal.take() else {
+            return false;
+        };
+        self.drop_timers(|t| *t != Timer::ProposalRunsOut);
+        let after_s = (now - open.proposed_ns) as f64 * 1e-9;
+        let (status, command_id, words) = match how {
+            Settled::Accepted { command_id } => (
+                ActionProposal::ACCEPTED,
+                command_id,
+                format!("accepted by the therapist after {after_s:.1} s"),
+            ),
+            Settled::Replaced { command_id } => (
+                ActionProposal::REPLACED,
+                command_id,
+                format!("replaced by the therapist after {after_s:.1} s"),
+            ),
+            Settled::TimedOut => (
+                ActionProposal::TIMED_OUT,
+                0,
+                format!(
+                    "not answered within {:.1} s: played",
+                    open.message.countdown
+                ),
+            ),
+        };
+        let mut plan = played.unwrap_or_else(|| open.plan.clone());
+        plan.reason = format!(
+            "{}; proposed to the therapist ({}, {}): {words}",
+            plan.reason,
+            action_words(open.plan.level, open.plan.feedback),
+            open.message.reason
+        );
+        let message = ActionProposal {
+            header: Header::at(Time::from_nanos(now)),
+            status,
+            played_action: plan.action.index() as u8,
+            played_level: plan.level.get(),
+            played_feedback: plan.feedback as u8,
+            command_id,
+            response_time: after_s as f32,
+            ..open.message
+        };
+        let index = message.step;
+        self.out.push(Output::Proposal(message));
+        if let Some(s) = self.session.as_mut() {
+            match how {
+                Settled::Accepted { .. } => s.proposals.accepted += 1,
+                Settled::Replaced { .. } => s.proposals.replaced += 1,
+                Settled::TimedOut => s.proposals.timed_out += 1,
+            }
+        }
+        self.out.push(Output::LiveLine(format!(
+            "sequence {index}: proposal {words}; {} plays",
+            action_words(plan.level, plan.feedback)
+        )));
+        self.status = format!(
+            "sequence {index}: proposal {words}; {} plays",
+            action_words(plan.level, plan.feedback)
+        );
+        self.current.plan = Some(plan);
+        self.publish_state(now);
+        self.maybe_present(now);
+        true
+    }
+
+    /// The session ends with a proposal open: nothing of it plays.
+    pub(super) fn withdraw_proposal(&mut self, now: i64) {
+        let Some(open) = self.current.proposal.take() else {
+            return;
+        };
+        self.out.push(Output::Proposal(ActionProposal {
+            header: Header::at(Time::from_nanos(now)),
+            status: ActionProposal::WITHDRAWN,
+            response_time: ((now - open.proposed_ns) as f64 * 1e-9) as f32,
+            ..open.message
+        }));
+    }
+
+    /// The open proposal's action, for an ACCEPT_PROPOSAL's check.
+    pub(super) fn open_proposal(&self) -> Option<Action> {
+        self.current.proposal.as_ref().map(|p| p.plan.action)
+    }
+}
