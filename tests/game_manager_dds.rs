@@ -251,13 +251,13 @@ fn proposals_to_the_therapist_are_accepted_replaced_or_run_out_over_dds() {
     assert!(
         records.records[1]
             .decision_reason
-            .contains("accepted by the therapist"),
+            .contains("accepted after"),
         "{context}"
     );
     assert!(
         records.records[3]
             .decision_reason
-            .contains("not answered within 2.0 s"),
+            .contains("ran out after 2.0 s: played"),
         "{context}"
     );
     let summary: SessionSummary =

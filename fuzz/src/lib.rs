@@ -39,7 +39,7 @@ type Decoder = fn(&[u8]);
 /// Every message and service type of `qt_therapy_msgs`, in a fixed order: the first input
 /// byte picks one (modulo the count), so the corpus files stay valid when types are added
 /// at the end.
-pub const MESSAGE_TYPES: [(&str, Decoder); 19] = [
+pub const MESSAGE_TYPES: [(&str, Decoder); 20] = [
     ("BehaviourState", decode_one::<BehaviourState>),
     ("OpenFaceFeatures", decode_one::<OpenFaceFeatures>),
     ("EngagementEstimate", decode_one::<EngagementEstimate>),
@@ -62,6 +62,7 @@ pub const MESSAGE_TYPES: [(&str, Decoder); 19] = [
     ),
     ("DecideAction_Request", decode_one::<DecideActionRequest>),
     ("DecideAction_Response", decode_one::<DecideActionResponse>),
+    ("ActionProposal", decode_one::<ActionProposal>),
 ];
 
 /// Input: one type byte, then a DDS serialized payload (2-byte representation identifier,

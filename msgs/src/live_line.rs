@@ -1,8 +1,9 @@
 //! The operator's view of a session: why the robot chose an action (the policy's decision,
-//! greedy or explored, with its Q-values; a therapist override; the safe fallback) and one
-//! line per scored sequence.
+//! greedy or explored, with its Q-values; a therapist override; the safe fallback), one line
+//! per scored sequence, and a proposal to the therapist (supervised autonomy) with what
+//! became of it, in the same words for the game manager, the console and the report.
 
-use crate::{Decision, SequenceResult};
+use crate::{ActionProposal, Decision, SequenceResult};
 use sequence_game::{Action, Feedback, Level};
 use std::time::Duration;
 
@@ -94,6 +95,61 @@ pub fn sequence_line(r: &SequenceResult, reason: &str) -> String {
     )
 }
 
+/// An action's effect in words: `L2`, `L2 + encouraging`.
+pub fn level_and_feedback(level: u8, feedback: u8) -> String {
+    match feedback {
+        0 => format!("L{level}"),
+        f => format!(
+            "L{level} + {}",
+            Feedback::new(f.into()).map_or("feedback ?", Feedback::name)
+        ),
+    }
+}
+
+/// A softmax temperature: whole numbers while it is large (it starts in the hundreds), two
+/// significant digits once it is small.
+fn temperature(t: f64) -> String {
+    if t.abs() >= 10.0 {
+        format!("{t:.0}")
+    } else if t.abs() >= 1.0 {
+        format!("{t:.1}")
+    } else {
+        format!("{t:.2}")
+    }
+}
+
+/// What the therapist is asked: `L2 + encouraging (T 235, σ 0.31)`.
+pub fn proposal_asked(p: &ActionProposal) -> String {
+    let sigma = if p.success_std < 0.0 {
+        "no user model".to_string()
+    } else {
+        format!("σ {:.2}", p.success_std)
+    };
+    format!(
+        "{} (T {}, {sigma})",
+        level_and_feedback(p.level, p.feedback),
+        temperature(p.temperature)
+    )
+}
+
+/// What became of a proposal, from the message that settled it: `accepted after 2.1 s`,
+/// `replaced by L3 after 1.2 s`, `ran out after 5.0 s: played`, `withdrawn (the session
+/// ended first)`.
+pub fn proposal_answer(s: &ActionProposal) -> String {
+    match s.status {
+        ActionProposal::PROPOSED => "waiting for the therapist".into(),
+        ActionProposal::ACCEPTED => format!("accepted after {:.1} s", s.response_time),
+        ActionProposal::REPLACED => format!(
+            "replaced by {} after {:.1} s",
+            level_and_feedback(s.played_level, s.played_feedback),
+            s.response_time
+        ),
+        ActionProposal::TIMED_OUT => format!("ran out after {:.1} s: played", s.response_time),
+        ActionProposal::WITHDRAWN => "withdrawn (the session ended first)".into(),
+        other => format!("status {other}?"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -159,5 +215,41 @@ mod tests {
             ..t
         };
         assert_eq!(reason_from_messages(&o, Some(&d)), "therapist override");
+    }
+
+    #[test]
+    fn a_proposal_and_its_answer_in_words() {
+        let p = ActionProposal {
+            level: 2,
+            feedback: 1,
+            temperature: 235.0,
+            success_std: 0.31,
+            ..Default::default()
+        };
+        assert_eq!(proposal_asked(&p), "L2 + encouraging (T 235, σ 0.31)");
+        let cool = ActionProposal {
+            temperature: 0.42,
+            success_std: -1.0,
+            feedback: 0,
+            ..p.clone()
+        };
+        assert_eq!(proposal_asked(&cool), "L2 (T 0.42, no user model)");
+        let replaced = ActionProposal {
+            status: ActionProposal::REPLACED,
+            played_level: 3,
+            played_feedback: 2,
+            response_time: 1.25,
+            ..p.clone()
+        };
+        assert_eq!(
+            proposal_answer(&replaced),
+            "replaced by L3 + challenging after 1.2 s"
+        );
+        let ran_out = ActionProposal {
+            status: ActionProposal::TIMED_OUT,
+            response_time: 5.0,
+            ..p
+        };
+        assert_eq!(proposal_answer(&ran_out), "ran out after 5.0 s: played");
     }
 }

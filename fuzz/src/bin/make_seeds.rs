@@ -466,6 +466,43 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         decision,
     };
     message(dir, "DecideAction_Response", "1", &decided)?;
+    message(dir, "ActionProposal", "0", &ActionProposal::default())?;
+    let proposed = ActionProposal {
+        header: header.clone(),
+        session_id: "s1".into(),
+        step: 4,
+        state: BehaviourState {
+            level: 2,
+            feedback: 0,
+            previous_score: -2,
+        },
+        action: 3,
+        level: 2,
+        feedback: 1,
+        temperature: 235.0,
+        success_std: 0.31,
+        reason: "state visited 3 times (T 235 > 100)".into(),
+        countdown: 5.0,
+        deadline: builtin_interfaces::Time {
+            sec: 1_700_000_005,
+            nanosec: 5,
+        },
+        status: ActionProposal::PROPOSED,
+        ..Default::default()
+    };
+    message(dir, "ActionProposal", "1", &proposed)?;
+    // Settled: the played fields are checked too.
+    let replaced = ActionProposal {
+        status: ActionProposal::REPLACED,
+        played_action: 2,
+        played_level: 3,
+        played_feedback: 0,
+        command_id: 9,
+        response_time: 1.25,
+        success_std: -1.0,
+        ..proposed
+    };
+    message(dir, "ActionProposal", "2", &replaced)?;
     Ok(())
 }
 

@@ -2,14 +2,19 @@
 //!   therapist start --user child-7 --cluster 0
 //!   therapist run-session --user sim-child --cluster 0   (start, follow to the end)
 //!   therapist override --session S --level 1 | pause | resume | stop | emergency-stop
+//!   therapist encourage --session S | challenge | accept    (feedback; the open proposal)
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
 use qt_therapy_msgs::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
-use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND};
-use qt_therapy_msgs::{Decision, GameState, TherapistCommand};
+use qt_therapy_msgs::topics::{
+    ACTION_PROPOSAL, DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND,
+};
+use qt_therapy_msgs::{ActionProposal, Decision, GameState, TherapistCommand};
 use std::time::Duration;
+
+mod proposals;
 
 #[derive(Parser)]
 #[command(about = "Send therapist commands to the game manager and follow a session")]
@@ -35,6 +40,10 @@ enum Command {
         /// -00002, ...); stops at the first that does not finish.
         #[arg(long, default_value_t = 1)]
         sessions: u32,
+        /// Accept each action the game manager proposes (supervised autonomy) as soon as it
+        /// is proposed, as a therapist who agrees with the robot would (simulated sessions).
+        #[arg(long)]
+        accept_proposals: bool,
     },
     Pause(SessionArg),
     Resume(SessionArg),
@@ -47,6 +56,15 @@ enum Command {
         #[arg(long, value_parser = clap::value_parser!(u8).range(1..=3))]
         level: u8,
     },
+    /// Give the next sequence encouraging feedback (it repeats the level; not the first
+    /// sequence). Replaces a proposal open for it.
+    Encourage(SessionArg),
+    /// Give the next sequence challenging feedback (it repeats the level; not the first
+    /// sequence). Replaces a proposal open for it.
+    Challenge(SessionArg),
+    /// Accept the action the game manager proposes now, before its countdown runs out
+    /// (refused when none is open).
+    Accept(SessionArg),
 }
 
 #[derive(clap::Args, Clone)]
@@ -92,6 +110,7 @@ async fn main() -> anyhow::Result<()> {
         let mut states = shell.subscribe(GAME_STATE, 64)?;
         let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
         let mut decisions = shell.subscribe(DECISION, 64)?;
+        let mut proposals = shell.subscribe(ACTION_PROPOSAL, 64)?;
         let code = match cli.command {
             Command::Start(a) => {
                 let c = start_command(&a, Some(&mut states)).await?;
@@ -101,6 +120,7 @@ async fn main() -> anyhow::Result<()> {
                 start,
                 timeout,
                 sessions,
+                accept_proposals,
             } => {
                 let mut code = 0;
                 for k in 1..=sessions {
@@ -110,6 +130,7 @@ async fn main() -> anyhow::Result<()> {
                         c.session_id = format!("{}-{k:05}", c.session_id);
                     }
                     let session = c.session_id.clone();
+                    let start_id = c.command_id;
                     code = send(&commands, &shell, &mut states, c).await?;
                     if code != 0 {
                         break;
@@ -118,11 +139,18 @@ async fn main() -> anyhow::Result<()> {
                         "session {session} started for user {} (cluster {})",
                         start.user, start.cluster
                     );
+                    let inputs = Inputs {
+                        states: &mut states,
+                        results: &mut results,
+                        decisions: &mut decisions,
+                        proposals: &mut proposals,
+                    };
+                    let proposals = proposals::Proposals::new(&session, accept_proposals, start_id);
                     code = follow(
                         &session,
-                        &mut states,
-                        &mut results,
-                        &mut decisions,
+                        inputs,
+                        proposals,
+                        &commands,
                         Duration::from_secs(timeout),
                         &shell,
                     )
@@ -173,6 +201,33 @@ async fn main() -> anyhow::Result<()> {
                 let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &session.session);
                 c.level = level;
                 send(&commands, &shell, &mut states, c).await?
+            }
+            Command::Encourage(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    &mut states,
+                    command(TherapistCommand::OVERRIDE_ENCOURAGING, &s.session),
+                )
+                .await?
+            }
+            Command::Challenge(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    &mut states,
+                    command(TherapistCommand::OVERRIDE_CHALLENGING, &s.session),
+                )
+                .await?
+            }
+            Command::Accept(s) => {
+                send(
+                    &commands,
+                    &shell,
+                    &mut states,
+                    command(TherapistCommand::ACCEPT_PROPOSAL, &s.session),
+                )
+                .await?
             }
         };
         Ok(code)
@@ -314,14 +369,41 @@ async fn check_free(
     Ok(())
 }
 
+/// What `follow` listens to.
+struct Inputs<'a> {
+    states: &'a mut tokio::sync::mpsc::Receiver<GameState>,
+    results: &'a mut tokio::sync::mpsc::Receiver<qt_therapy_msgs::SequenceResult>,
+    decisions: &'a mut tokio::sync::mpsc::Receiver<Decision>,
+    proposals: &'a mut tokio::sync::mpsc::Receiver<ActionProposal>,
+}
+
+/// Prints the session's steps, a line per sequence and per proposal and its settlement, until
+/// the session ends; with `proposals` accepting, accepts each proposal (answers to those
+/// accepts come on the game states, read here as well).
 async fn follow(
     session: &str,
-    states: &mut tokio::sync::mpsc::Receiver<GameState>,
-    results: &mut tokio::sync::mpsc::Receiver<qt_therapy_msgs::SequenceResult>,
-    decisions: &mut tokio::sync::mpsc::Receiver<Decision>,
+    inputs: Inputs<'_>,
+    mut proposals: proposals::Proposals,
+    commands: &Outbox<TherapistCommand>,
     timeout: Duration,
     shell: &NodeShell,
 ) -> anyhow::Result<i32> {
+    let Inputs {
+        states,
+        results,
+        decisions,
+        proposals: proposal_messages,
+    } = inputs;
+    let carry_out = |events: Vec<proposals::Event>| {
+        for e in events {
+            match e {
+                proposals::Event::Print(line) => println!("{line}"),
+                proposals::Event::Send(c) => {
+                    commands.send(c);
+                }
+            }
+        }
+    };
     let deadline = tokio::time::sleep(timeout);
     tokio::pin!(deadline);
     let stop = shell.shutdown_signal();
@@ -330,9 +412,19 @@ async fn follow(
     let mut last_status = String::new();
     let mut results_seen = 0;
     loop {
+        let resend = proposals.next_send();
+        // Far enough never to come: the branch is disabled without a send due.
+        let resend_at = resend.unwrap_or_else(|| std::time::Instant::now() + timeout);
         tokio::select! {
             _ = &mut deadline => { println!("session {session}: no end within {timeout:?}"); return Ok(2); }
             _ = &mut stop => return Ok(130),
+            _ = tokio::time::sleep_until(resend_at.into()), if resend.is_some() => {
+                carry_out(proposals.on_tick(std::time::Instant::now()));
+            }
+            Some(p) = proposal_messages.recv() => {
+                let now_ms = (now_nanos() / 1_000_000).max(1) as u64;
+                carry_out(proposals.on_proposal(&p, std::time::Instant::now(), now_ms));
+            }
             Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
             Some(r) = results.recv() => if r.session_id == session {
                 let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
@@ -340,6 +432,7 @@ async fn follow(
                 results_seen += 1;
             },
             Some(s) = states.recv() => {
+                carry_out(proposals.on_state(&s));
                 if s.session_id != session { continue; }
                 if !s.status.is_empty() && s.status != last_status {
                     println!("  [{}] {}", phase_name(s.phase), s.status);

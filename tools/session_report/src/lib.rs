@@ -2,11 +2,15 @@
 //! It takes the messages a session produced (from a bag or live), and writes one
 //! self-contained HTML page with plots: level and score per sequence, expected engagement over
 //! time with the answers and stage ends (the paper's Fig. 2; one figure per camera / face),
-//! and every decision with its Q-values and whether the robot explored.
+//! every decision with its Q-values and whether the robot explored, and what the therapist was
+//! asked when the game manager proposed an action (supervised autonomy) and how they answered.
 
 use figures::engagement::{EngagementPlot, engagement_svg};
 use plotters::prelude::*;
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, Tally};
+use qt_therapy_msgs::live_line::{proposal_answer, proposal_asked};
+use qt_therapy_msgs::{
+    ActionProposal, Decision, ExpectedEngagement, GameState, SequenceResult, Tally,
+};
 use std::fmt::Write as _;
 
 /// Why a report could not be made.
@@ -28,6 +32,9 @@ pub struct SessionLog {
     pub engagement: Vec<ExpectedEngagement>,
     pub decisions: Vec<Decision>,
     pub states: Vec<GameState>,
+    /// Actions proposed to the therapist and their settlement (none in a bag recorded
+    /// before supervised autonomy, or with it off).
+    pub proposals: Vec<ActionProposal>,
 }
 
 /// Totals shown at the top of the report.
@@ -41,6 +48,62 @@ pub struct Summary {
     pub overrides: usize,
     pub policy_fallbacks: usize,
     pub explored: usize,
+    pub proposals: ProposalTally,
+}
+
+/// What the therapist was asked (supervised autonomy) over a session, and how it ended.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ProposalTally {
+    /// Sequences whose action was proposed (a proposal made again after a pause counts once).
+    pub proposed: usize,
+    pub accepted: usize,
+    pub replaced: usize,
+    /// Nobody answered within the countdown: the proposal was carried out.
+    pub timed_out: usize,
+    /// The session ended first.
+    pub withdrawn: usize,
+    /// Proposed, but the bag holds no settlement (it ends, or is damaged, before it).
+    pub unsettled: usize,
+    /// Mean seconds from proposal to the therapist's answer (accepted or replaced).
+    pub mean_response_time: Option<f64>,
+}
+
+/// One sequence's proposal: the messages of one (session, step).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proposal<'a> {
+    /// The last PROPOSED message (a pause proposes again with a fresh countdown).
+    pub proposed: &'a ActionProposal,
+    /// How many times it was proposed.
+    pub times_proposed: usize,
+    /// The message that settled it, if the log holds one.
+    pub settled: Option<&'a ActionProposal>,
+}
+
+impl Proposal<'_> {
+    pub fn session_id(&self) -> &str {
+        &self.settled.unwrap_or(self.proposed).session_id
+    }
+
+    pub fn step(&self) -> u8 {
+        self.settled.unwrap_or(self.proposed).step
+    }
+
+    /// What the therapist was asked and answered, in words: `proposed L2 + encouraging
+    /// (T 235, σ 0.31): accepted after 2.1 s`.
+    pub fn describe(&self) -> String {
+        let again = if self.times_proposed > 1 {
+            format!(", {} times", self.times_proposed)
+        } else {
+            String::new()
+        };
+        let answer = self
+            .settled
+            .map_or_else(|| "no answer recorded".to_string(), proposal_answer);
+        format!(
+            "proposed {}{again}: {answer}",
+            proposal_asked(self.proposed)
+        )
+    }
 }
 
 impl SessionLog {
@@ -50,7 +113,9 @@ impl SessionLog {
         reader: &bag_file::BagReader,
         session: Option<&str>,
     ) -> Result<SessionLog, bag_file::BagError> {
-        use qt_therapy_msgs::topics::{DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT};
+        use qt_therapy_msgs::topics::{
+            ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT,
+        };
         let results: Vec<SequenceResult> = reader.topic_messages(SEQUENCE_RESULT)?;
         let wanted = session
             .map(str::to_string)
@@ -70,6 +135,12 @@ impl SessionLog {
                 .topic_messages(GAME_STATE)?
                 .into_iter()
                 .filter(|s| s.session_id == wanted)
+                .collect(),
+            // Absent from bags recorded before supervised autonomy: none then.
+            proposals: reader
+                .topic_messages(ACTION_PROPOSAL)?
+                .into_iter()
+                .filter(|p| p.session_id == wanted)
                 .collect(),
             engagement: reader.topic_messages(EXPECTED_ENGAGEMENT)?,
         };
@@ -99,7 +170,103 @@ impl SessionLog {
                 .collect::<std::collections::BTreeSet<_>>()
                 .len(),
             explored: self.decisions.iter().filter(|d| d.explored).count(),
+            proposals: self.proposal_tally(),
         })
+    }
+
+    /// Each (session, step) proposed to the therapist, in the order first proposed. A
+    /// settlement without its PROPOSED message (the bag began after it) stands for both.
+    pub fn proposals(&self) -> Vec<Proposal<'_>> {
+        let mut out: Vec<Proposal<'_>> = Vec::new();
+        for (i, p) in self.proposals.iter().enumerate() {
+            let at = out
+                .iter()
+                .position(|o| o.session_id() == p.session_id && o.step() == p.step);
+            let entry = match at {
+                Some(i) => &mut out[i],
+                None => {
+                    out.push(Proposal {
+                        proposed: p,
+                        times_proposed: 0,
+                        settled: None,
+                    });
+                    out.last_mut().expect("just pushed")
+                }
+            };
+            if p.status == ActionProposal::PROPOSED {
+                // A recorder that joined again gets the durable topic's history once more:
+                // the same proposal (same deadline) is not proposed again.
+                let repeat = self.proposals[..i].iter().any(|q| {
+                    q.status == ActionProposal::PROPOSED
+                        && q.session_id == p.session_id
+                        && q.step == p.step
+                        && q.deadline == p.deadline
+                });
+                entry.proposed = p;
+                entry.times_proposed += usize::from(!repeat);
+            } else {
+                entry.settled = Some(p);
+            }
+        }
+        out
+    }
+
+    /// The proposal of one sequence, if its action was proposed.
+    pub fn proposal_for(&self, session_id: &str, step: u8) -> Option<Proposal<'_>> {
+        self.proposals()
+            .into_iter()
+            .find(|p| p.session_id() == session_id && p.step() == step)
+    }
+
+    fn proposal_tally(&self) -> ProposalTally {
+        let mut t = ProposalTally::default();
+        let mut answered = Vec::new();
+        for p in self.proposals() {
+            t.proposed += 1;
+            match p.settled.map(|s| s.status) {
+                Some(ActionProposal::ACCEPTED) => t.accepted += 1,
+                Some(ActionProposal::REPLACED) => t.replaced += 1,
+                Some(ActionProposal::TIMED_OUT) => t.timed_out += 1,
+                Some(ActionProposal::WITHDRAWN) => t.withdrawn += 1,
+                _ => t.unsettled += 1,
+            }
+            if let Some(s) = p.settled.filter(|s| {
+                matches!(
+                    s.status,
+                    ActionProposal::ACCEPTED | ActionProposal::REPLACED
+                )
+            }) {
+                answered.push(f64::from(s.response_time));
+            }
+        }
+        t.mean_response_time =
+            (!answered.is_empty()).then(|| answered.iter().sum::<f64>() / answered.len() as f64);
+        t
+    }
+}
+
+impl ProposalTally {
+    /// The summary's sentence: `Proposals to the therapist 4: accepted 2, replaced 1, ran
+    /// out 1; mean answer 1.6 s.`
+    pub fn sentence(&self) -> String {
+        if self.proposed == 0 {
+            return "No action was proposed to the therapist.".to_string();
+        }
+        let mut s = format!(
+            "Proposals to the therapist {}: accepted {}, replaced {}, ran out {}",
+            self.proposed, self.accepted, self.replaced, self.timed_out
+        );
+        if self.withdrawn > 0 {
+            let _ = write!(s, ", withdrawn {}", self.withdrawn);
+        }
+        if self.unsettled > 0 {
+            let _ = write!(s, ", no answer recorded {}", self.unsettled);
+        }
+        if let Some(m) = self.mean_response_time {
+            let _ = write!(s, "; mean answer {m:.1} s");
+        }
+        s.push('.');
+        s
     }
 }
 
@@ -336,7 +503,7 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>{title}</title><style>\
          body{{font-family:sans-serif;margin:24px;max-width:1150px}} table{{border-collapse:collapse}}\
          td,th{{border:1px solid #bbb;padding:3px 7px;text-align:right}} th{{background:#eef}}\
-         .ok{{color:#1a7f37}} .bad{{color:#c0392b}} .expl{{background:#fff3cd}}</style></head><body>\
+         .asked{{text-align:left}} .ok{{color:#1a7f37}} .bad{{color:#c0392b}} .expl{{background:#fff3cd}}</style></head><body>\
          <h1>{title}</h1>"
     );
     let engagement = s
@@ -348,7 +515,7 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
         html,
         "<p>User-model cluster <b>{}</b>. {} sequences, {} right. Score <b>{}</b> of {} possible \
          (ratio {:.2}). Mean expected engagement <b>{engagement}</b>. Timeouts {}, therapist \
-         overrides {}, policy fallbacks {}, exploratory decisions {}.</p>",
+         overrides {}, policy fallbacks {}, exploratory decisions {}. {}</p>",
         s.cluster,
         s.tally.sequences,
         s.tally.correct,
@@ -358,7 +525,8 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
         s.tally.timeouts,
         s.overrides,
         s.policy_fallbacks,
-        s.explored
+        s.explored,
+        escape(&s.proposals.sentence())
     );
     html.push_str(&levels_svg(log)?);
     let figures = engagement_figures(log);
@@ -385,7 +553,7 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
     }
     html.push_str(
         "<h2>Sequences and decisions</h2><table><tr><th>#</th><th>state (L,F,PS)</th><th>action</th>\
-         <th>how chosen</th><th>T</th><th>Q(L1)</th><th>Q(L2)</th><th>Q(L3)</th><th>Q(enc)</th>\
+         <th>how chosen</th><th>therapist asked</th><th>T</th><th>Q(L1)</th><th>Q(L2)</th><th>Q(L3)</th><th>Q(enc)</th>\
          <th>Q(chal)</th><th>sequence</th><th>answer</th><th>result</th><th>time s</th><th>E</th></tr>",
     );
     for r in &log.results {
@@ -419,6 +587,16 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
                 "",
             ),
         };
+        let asked = log
+            .proposal_for(&r.session_id, r.sequence_index)
+            .map(|p| {
+                format!(
+                    "{}<br><small>{}</small>",
+                    escape(&p.describe()),
+                    escape(&p.proposed.reason)
+                )
+            })
+            .unwrap_or_default();
         let result = if r.timed_out {
             "<span class=\"bad\">timeout</span>".to_string()
         } else if r.outcome == 1 {
@@ -428,7 +606,7 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
         };
         let _ = write!(
             html,
-            "<tr{row_class}><td>{}</td><td>({},{},{:+})</td><td>{action}</td><td>{how}</td><td>{t}</td>",
+            "<tr{row_class}><td>{}</td><td>({},{},{:+})</td><td>{action}</td><td>{how}</td><td class=\"asked\">{asked}</td><td>{t}</td>",
             r.sequence_index, r.state.level, r.state.feedback, r.state.previous_score
         );
         for q in qs.iter().chain(std::iter::repeat(&String::new())).take(5) {
@@ -443,7 +621,30 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
             r.engagement
         );
     }
-    html.push_str("</table></body></html>\n");
+    html.push_str("</table>");
+    // Proposals of sequences that never played (withdrawn when the session ended).
+    let unplayed: Vec<Proposal<'_>> = log
+        .proposals()
+        .into_iter()
+        .filter(|p| {
+            !log.results
+                .iter()
+                .any(|r| r.session_id == p.session_id() && r.sequence_index == p.step())
+        })
+        .collect();
+    if !unplayed.is_empty() {
+        html.push_str("<h2>Proposals of sequences not played</h2><ul>");
+        for p in unplayed {
+            let _ = write!(
+                html,
+                "<li>sequence {}: {}</li>",
+                p.step(),
+                escape(&p.describe())
+            );
+        }
+        html.push_str("</ul>");
+    }
+    html.push_str("</body></html>\n");
     Ok(html)
 }
 
@@ -624,5 +825,300 @@ mod tests {
         assert_eq!(html.matches("<tr").count(), 4);
         assert!(html.contains("Score <b>0</b> of 6"));
         assert!(html.contains("child-7"));
+    }
+
+    /// A proposal message of session s1 for `step`: L2 + encouraging (a4) at T 235, σ 0.31.
+    fn proposal(step: u8, status: u8, deadline_s: i32) -> ActionProposal {
+        ActionProposal {
+            header: Header::at(Time {
+                sec: deadline_s - 5,
+                nanosec: 0,
+            }),
+            session_id: "s1".into(),
+            step,
+            state: BehaviourState {
+                level: 2,
+                feedback: 0,
+                previous_score: -2,
+            },
+            action: 3,
+            level: 2,
+            feedback: 1,
+            temperature: 235.0,
+            success_std: 0.31,
+            reason: format!("state visited {step} times (T 235 > 100)"),
+            countdown: 5.0,
+            deadline: Time {
+                sec: deadline_s,
+                nanosec: 0,
+            },
+            status,
+            ..Default::default()
+        }
+    }
+
+    /// Settled as `status`, `after` seconds from the proposal, playing `played` (level,
+    /// feedback).
+    fn settled(step: u8, status: u8, after: f32, played: (u8, u8)) -> ActionProposal {
+        ActionProposal {
+            played_action: if played.1 == 0 {
+                played.0.saturating_sub(1)
+            } else {
+                2 + played.1
+            },
+            played_level: played.0,
+            played_feedback: played.1,
+            command_id: if matches!(status, ActionProposal::ACCEPTED | ActionProposal::REPLACED) {
+                100 + u64::from(step)
+            } else {
+                0
+            },
+            response_time: after,
+            ..proposal(step, status, 0)
+        }
+    }
+
+    /// Sequences 1..5 played; 2 accepted, 3 replaced by level 3, 4 proposed twice (a pause)
+    /// and run out, 5 proposed with no settlement in the log, 6 withdrawn when the session
+    /// ended (never played); a proposal of another session for step 2 stays out.
+    fn supervised_log() -> SessionLog {
+        let mut results: Vec<SequenceResult> = (1..=5)
+            .map(|i| result(i, 2, 1, 10 * i32::from(i)))
+            .collect();
+        results[2].level = 3;
+        results[2].overridden = true;
+        let other = ActionProposal {
+            session_id: "s2".into(),
+            ..settled(2, ActionProposal::REPLACED, 0.5, (1, 0))
+        };
+        let p4 = proposal(4, ActionProposal::PROPOSED, 45);
+        let proposals = vec![
+            proposal(2, ActionProposal::PROPOSED, 25),
+            other,
+            settled(2, ActionProposal::ACCEPTED, 2.1, (2, 1)),
+            proposal(3, ActionProposal::PROPOSED, 35),
+            settled(3, ActionProposal::REPLACED, 1.2, (3, 0)),
+            p4.clone(),
+            // The recorder's durable history again: the same proposal, not a second one.
+            p4,
+            // Paused, then proposed again with a fresh countdown.
+            ActionProposal {
+                countdown: 4.0,
+                ..proposal(4, ActionProposal::PROPOSED, 60)
+            },
+            settled(4, ActionProposal::TIMED_OUT, 5.0, (2, 1)),
+            proposal(5, ActionProposal::PROPOSED, 55),
+            proposal(6, ActionProposal::PROPOSED, 65),
+            settled(6, ActionProposal::WITHDRAWN, 0.0, (0, 0)),
+        ];
+        SessionLog {
+            results,
+            proposals,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn each_proposal_says_what_the_therapist_was_asked_and_answered() {
+        let log = supervised_log();
+        let described = |step| {
+            log.proposal_for("s1", step)
+                .map(|p| p.describe())
+                .unwrap_or_else(|| panic!("no proposal for {step}"))
+        };
+        assert_eq!(
+            described(2),
+            "proposed L2 + encouraging (T 235, σ 0.31): accepted after 2.1 s"
+        );
+        assert_eq!(
+            described(3),
+            "proposed L2 + encouraging (T 235, σ 0.31): replaced by L3 after 1.2 s"
+        );
+        assert_eq!(
+            described(4),
+            "proposed L2 + encouraging (T 235, σ 0.31), 2 times: ran out after 5.0 s: played"
+        );
+        assert_eq!(
+            described(5),
+            "proposed L2 + encouraging (T 235, σ 0.31): no answer recorded"
+        );
+        assert_eq!(
+            described(6),
+            "proposed L2 + encouraging (T 235, σ 0.31): withdrawn (the session ended first)"
+        );
+        assert!(log.proposal_for("s1", 1).is_none());
+        // The last proposal stands for the step: the one after the pause.
+        let p4 = log.proposal_for("s1", 4).expect("step 4");
+        assert_eq!((p4.proposed.countdown, p4.proposed.deadline.sec), (4.0, 60));
+        assert_eq!(
+            log.proposal_for("s2", 2).map(|p| p.describe()),
+            Some("proposed L2 + encouraging (T 235, σ 0.31): replaced by L1 after 0.5 s".into()),
+            "a settlement without its proposal stands for both"
+        );
+
+        // No user model, a small temperature, challenging feedback.
+        let p = ActionProposal {
+            success_std: -1.0,
+            temperature: 0.42,
+            feedback: 2,
+            level: 3,
+            ..proposal(7, ActionProposal::PROPOSED, 75)
+        };
+        let replaced = ActionProposal {
+            success_std: -1.0,
+            ..settled(7, ActionProposal::REPLACED, 0.25, (3, 1))
+        };
+        let log7 = SessionLog {
+            proposals: vec![p, replaced],
+            ..Default::default()
+        };
+        assert_eq!(
+            log7.proposal_for("s1", 7).map(|p| p.describe()),
+            Some(
+                "proposed L3 + challenging (T 0.42, no user model): replaced by L3 + \
+                 encouraging after 0.2 s"
+                    .into()
+            )
+        );
+    }
+
+    #[test]
+    fn the_summary_counts_proposals_and_how_they_ended() {
+        let log = SessionLog {
+            // Only s1's, as from_bag keeps them.
+            proposals: supervised_log()
+                .proposals
+                .into_iter()
+                .filter(|p| p.session_id == "s1")
+                .collect(),
+            ..supervised_log()
+        };
+        let t = log.summary().expect("summary").proposals;
+        assert_eq!(
+            t,
+            ProposalTally {
+                proposed: 5,
+                accepted: 1,
+                replaced: 1,
+                timed_out: 1,
+                withdrawn: 1,
+                unsettled: 1,
+                mean_response_time: Some((f64::from(2.1f32) + f64::from(1.2f32)) / 2.0),
+            }
+        );
+        assert_eq!(
+            t.sentence(),
+            "Proposals to the therapist 5: accepted 1, replaced 1, ran out 1, withdrawn 1, \
+             no answer recorded 1; mean answer 1.6 s."
+        );
+        assert_eq!(
+            ProposalTally::default().sentence(),
+            "No action was proposed to the therapist."
+        );
+
+        let html = report_html(&log).expect("report");
+        assert!(
+            html.contains("Proposals to the therapist 5: accepted 1"),
+            "{html}"
+        );
+        // The table's rows: the proposal in its own column, beside how the action was chosen.
+        let rows: Vec<&str> = html.split("<tr").skip(2).collect();
+        assert_eq!(rows.len(), 5, "a row per played sequence");
+        let asked = |row: &str| {
+            let start = row.find("<td class=\"asked\">").expect("the column") + 18;
+            row[start..start + row[start..].find("</td>").expect("cell end")].to_string()
+        };
+        assert_eq!(asked(rows[0]), "", "sequence 1 was not proposed");
+        assert_eq!(
+            asked(rows[1]),
+            "proposed L2 + encouraging (T 235, σ 0.31): accepted after 2.1 s<br>\
+             <small>state visited 2 times (T 235 &gt; 100)</small>"
+        );
+        assert!(
+            rows[2].contains("<td>therapist override</td>"),
+            "{}",
+            rows[2]
+        );
+        assert!(asked(rows[2]).contains("replaced by L3 after 1.2 s"));
+        assert!(asked(rows[3]).contains("ran out after 5.0 s: played"));
+        assert!(asked(rows[4]).contains("no answer recorded"));
+        // Sequence 6 never played: its proposal is listed after the table.
+        let after = &html[html.find("</table>").expect("table end")..];
+        assert!(
+            after.contains(
+                "<h2>Proposals of sequences not played</h2><ul><li>sequence 6: proposed L2 + \
+                 encouraging (T 235, σ 0.31): withdrawn (the session ended first)</li></ul>"
+            ),
+            "{after}"
+        );
+        assert!(!after.contains("sequence 5:"), "sequence 5 played");
+
+        // Without proposals: the column stays empty and nothing is listed after the table.
+        let plain = SessionLog {
+            proposals: Vec::new(),
+            ..log
+        };
+        let html = report_html(&plain).expect("report");
+        assert!(html.contains("No action was proposed to the therapist."));
+        assert_eq!(html.matches("<td class=\"asked\"></td>").count(), 5);
+        assert!(!html.contains("not played"));
+    }
+
+    #[test]
+    fn proposals_are_read_from_a_bag_and_a_bag_without_them_still_reports() {
+        use qt_therapy_msgs::topics::{ACTION_PROPOSAL, SEQUENCE_RESULT};
+        let options = bag_file::WriterOptions::default();
+        let write = |with_proposals: bool| {
+            let mut w = bag_file::BagWriter::new(std::io::Cursor::new(Vec::new()), "t", &options)
+                .expect("writer");
+            let results = w.add_topic(SEQUENCE_RESULT).expect("topic");
+            let proposals = with_proposals.then(|| w.add_topic(ACTION_PROPOSAL).expect("topic"));
+            let log = supervised_log();
+            for (k, r) in log.results.iter().enumerate() {
+                w.write(results, 1_000 + k as u64, r).expect("writes");
+            }
+            if let Some(topic) = proposals {
+                for (k, p) in log.proposals.iter().enumerate() {
+                    w.write(topic, 2_000 + k as u64, p).expect("writes");
+                }
+            }
+            let bytes = w.finish().expect("finishes").into_inner();
+            bag_file::BagReader::from_bytes(&bytes, "t", &bag_file::ReadOptions::default())
+                .expect("reads")
+        };
+        let log = SessionLog::from_bag(&write(true), None).expect("decodes");
+        assert_eq!(log.proposals.len(), 11, "s1's, not s2's");
+        let t = log.summary().expect("summary").proposals;
+        assert_eq!(
+            (t.proposed, t.accepted, t.replaced, t.timed_out),
+            (5, 1, 1, 1)
+        );
+
+        let log = SessionLog::from_bag(&write(false), None).expect("decodes");
+        assert!(log.proposals.is_empty());
+        assert!(
+            report_html(&log)
+                .expect("report")
+                .contains("No action was proposed to the therapist.")
+        );
+    }
+
+    #[test]
+    fn a_sample_bag_recorded_before_proposals_still_reports() {
+        let bag = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../bags/cluster1_seed11_pause_override.mcap");
+        let reader = bag_file::BagReader::open(&bag).expect("the sample bag");
+        assert!(
+            reader
+                .topic_channels(qt_therapy_msgs::topics::ACTION_PROPOSAL.name)
+                .is_empty(),
+            "the sample bag predates proposals"
+        );
+        let log = SessionLog::from_bag(&reader, None).expect("decodes");
+        let s = log.summary().expect("summary");
+        assert!(s.tally.sequences > 0 && s.overrides > 0, "{s:?}");
+        assert_eq!(s.proposals, ProposalTally::default());
+        let html = report_html(&log).expect("report");
+        assert!(html.contains("No action was proposed to the therapist."));
     }
 }

@@ -89,6 +89,9 @@ fn main() -> anyhow::Result<()> {
         s.tally.max_score,
         output.display()
     );
+    if s.proposals.proposed > 0 {
+        println!("{}", s.proposals.sentence());
+    }
     Ok(())
 }
 

@@ -9,6 +9,7 @@
 use super::{GameManager, Phase, Plan, Timer};
 use crate::protocol::{LogLevel, Output};
 use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::live_line::{level_and_feedback, proposal_answer, proposal_asked};
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, BehaviourState};
 use sequence_game::{Action, Feedback, Level, ModelInput, UserModelTable};
@@ -39,12 +40,9 @@ pub(super) enum Settled {
     TimedOut,
 }
 
-/// An action in the therapist's words: "level 2", "level 2 with encouraging feedback".
+/// An action in the therapist's words: `L2`, `L2 + encouraging`.
 pub(super) fn action_words(level: Level, feedback: Feedback) -> String {
-    match feedback {
-        Feedback::None => format!("level {}", level.get()),
-        f => format!("level {} with {} feedback", level.get(), f.name()),
-    }
+    level_and_feedback(level.get(), feedback as u8)
 }
 
 impl GameManager {
@@ -208,33 +206,14 @@ impl GameManager {
         };
         self.drop_timers(|t| *t != Timer::ProposalRunsOut);
         let after_s = (now - open.proposed_ns) as f64 * 1e-9;
-        let (status, command_id, words) = match how {
-            Settled::Accepted { command_id } => (
-                ActionProposal::ACCEPTED,
-                command_id,
-                format!("accepted by the therapist after {after_s:.1} s"),
-            ),
-            Settled::Replaced { command_id } => (
-                ActionProposal::REPLACED,
-                command_id,
-                format!("replaced by the therapist after {after_s:.1} s"),
-            ),
-            Settled::TimedOut => (
-                ActionProposal::TIMED_OUT,
-                0,
-                format!(
-                    "not answered within {:.1} s: played",
-                    open.message.countdown
-                ),
-            ),
+        let (status, command_id) = match how {
+            Settled::Accepted { command_id } => (ActionProposal::ACCEPTED, command_id),
+            Settled::Replaced { command_id } => (ActionProposal::REPLACED, command_id),
+            Settled::TimedOut => (ActionProposal::TIMED_OUT, 0),
         };
         let mut plan = played.unwrap_or_else(|| open.plan.clone());
-        plan.reason = format!(
-            "{}; proposed to the therapist ({}, {}): {words}",
-            plan.reason,
-            action_words(open.plan.level, open.plan.feedback),
-            open.message.reason
-        );
+        let asked = proposal_asked(&open.message);
+        let why = open.message.reason.clone();
         let message = ActionProposal {
             header: Header::at(Time::from_nanos(now)),
             status,
@@ -246,6 +225,11 @@ impl GameManager {
             ..open.message
         };
         let index = message.step;
+        let answer = proposal_answer(&message);
+        plan.reason = format!(
+            "{}; proposed to the therapist: {asked}, as {why}: {answer}",
+            plan.reason
+        );
         self.out.push(Output::Proposal(message));
         if let Some(s) = self.session.as_mut() {
             match how {
@@ -254,14 +238,10 @@ impl GameManager {
                 Settled::TimedOut => s.proposals.timed_out += 1,
             }
         }
-        self.out.push(Output::LiveLine(format!(
-            "sequence {index}: proposal {words}; {} plays",
-            action_words(plan.level, plan.feedback)
-        )));
-        self.status = format!(
-            "sequence {index}: proposal {words}; {} plays",
-            action_words(plan.level, plan.feedback)
-        );
+        let played_words = action_words(plan.level, plan.feedback);
+        let line = format!("sequence {index}: proposal {asked} {answer}; {played_words} plays");
+        self.out.push(Output::LiveLine(line.clone()));
+        self.status = line;
         self.current.plan = Some(plan);
         self.publish_state(now);
         self.maybe_present(now);

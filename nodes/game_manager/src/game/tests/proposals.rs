@@ -88,7 +88,7 @@ fn an_accepted_proposal_plays_at_once() {
     h.run_until(proposed_at + 4 * S);
     let state = h.last_state();
     assert_eq!(state.phase, GameState::DECIDING);
-    assert!(state.status.contains("proposing level"), "{}", state.status);
+    assert!(state.status.contains("proposing L2"), "{}", state.status);
     assert_eq!(h.tasks().len(), 1);
     h.feed(accept("s", 2));
     let (_, settled) = proposals(&h).pop().expect("settled");
@@ -113,7 +113,7 @@ fn an_accepted_proposal_plays_at_once() {
     assert_eq!((r[1].action, r[1].overridden), (p.action, false));
     let reason = &h.records()[1].decision_reason;
     assert!(
-        reason.contains("accepted by the therapist after 4.0 s"),
+        reason.ends_with("proposed to the therapist: L2 (T 250, no user model), as the state is little visited (temperature 250.0 > 100): accepted after 4.0 s"),
         "{reason}"
     );
     let summary = &h.summaries()[0];
@@ -232,7 +232,7 @@ fn an_unanswered_proposal_plays_when_its_countdown_runs_out() {
     assert!(
         h.records()[2]
             .decision_reason
-            .contains("not answered within 5.0 s")
+            .ends_with("ran out after 5.0 s: played")
     );
     assert_eq!(h.summaries()[0].proposals_timed_out, 2);
 }
