@@ -438,6 +438,34 @@ mod tests {
     }
 
     #[test]
+    fn what_the_therapist_chose_is_learned_as_played() {
+        // Supervised autonomy: a proposal the therapist replaced (or any override) comes back
+        // as the action that played, flagged overridden; the table learns that action.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut policies = open(dir.path());
+        let replaced = SequenceResult {
+            action: 2,
+            level: 3,
+            overridden: true,
+            outcome: 1,
+            activity_result: 3.0,
+            ..result(0)
+        };
+        policies.learn(&replaced).expect("learned");
+        let row = *policies
+            .ready(0)
+            .expect("cluster 0")
+            .core()
+            .q_table()
+            .row(State::START);
+        assert!(row[2] > 0.0, "a3 (level 3) learned: {row:?}");
+        assert_eq!(
+            row[1], 0.0,
+            "a2, the policy's own choice, untouched: {row:?}"
+        );
+    }
+
+    #[test]
     fn unknown_clusters_and_bad_results_are_refused_by_name() {
         let dir = tempfile::tempdir().expect("tempdir");
         let mut policies = open(dir.path());
