@@ -1,5 +1,5 @@
 // The therapist tablet: unlock with the PIN, then watch the game (state, engagement trend,
-// each decision with its Q-values, each result) and command it. The bridge checks everything
+// each decision with its Q-values, each result) and command it; proposals are proposal.js's. The bridge checks everything
 // again; the buttons' enabled state is only a hint. The game's rules (which phases are a
 // sequence under way, the actions and feedback by name, a sequence's score and the session's
 // total) come from the bridge; this page only shows and translates them.
@@ -58,6 +58,7 @@ function showGame(g) {
   $("g-user").textContent = g.user_id ? g.user_id + " (cluster " + g.cluster + ")" : "–";
   $("g-status").textContent = g.status || "–";
   updateButtons();
+  proposalFollowsGame(g);
 }
 
 function cell(row, content, className) {
@@ -203,11 +204,13 @@ function onMessage(m) {
       $("decisions").tBodies[0].replaceChildren();
       $("results").tBodies[0].replaceChildren();
       $("g-total").textContent = "–";
+      clearProposal();
       show("main");
       break;
     case "game": showGame(m); break;
     case "decision": addDecision(m); break;
     case "result": addResult(m); break;
+    case "proposal": showProposal(m); break;
     case "engagement": addEngagement(m); drawTrend(); break;
     case "engagement_history": engagement = m.points; drawTrend(); break;
     case "command_sent":

@@ -4,6 +4,7 @@
 
 use crate::limits::TokenBucket;
 use crate::params::TabletBridgeParams;
+use crate::proposal::KeptProposal;
 use crate::protocol::{
     ClientMessage, CommandKind, DecisionView, EngagementPoint, ResultView, Role, ServerMessage,
     TaskView, parse_client_message,
@@ -11,8 +12,8 @@ use crate::protocol::{
 use crate::therapist::CommandIds;
 use crate::watch::GameManagerWatch;
 use qt_therapy_msgs::{
-    Decision, ExpectedEngagement, GameState, Heartbeat, SequenceResult, TabletAnswer, TabletTask,
-    TherapistCommand,
+    ActionProposal, Decision, ExpectedEngagement, GameState, Heartbeat, SequenceResult,
+    TabletAnswer, TabletTask, TherapistCommand,
 };
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -55,6 +56,8 @@ pub enum DdsInput {
     Decision(Decision),
     Engagement(ExpectedEngagement),
     Result(SequenceResult),
+    /// The game manager's proposal (supervised autonomy), for the therapist page only.
+    Proposal(ActionProposal),
     /// Any node's heartbeat; the game manager's are watched.
     Heartbeat(Heartbeat),
 }
@@ -91,6 +94,8 @@ pub struct Bridge {
     pub(crate) results: VecDeque<ResultView>,
     /// The results of the session the newest result belongs to, for its running tally.
     pub(crate) session_results: Vec<SequenceResult>,
+    /// The newest proposal of the game's session, open or settled.
+    pub(crate) proposal: Option<KeptProposal>,
     /// The session commands go to: the game's, or the one this bridge just started.
     pub(crate) current_session: Option<String>,
     pub(crate) command_ids: CommandIds,
@@ -117,6 +122,7 @@ impl Bridge {
             decisions: VecDeque::new(),
             results: VecDeque::new(),
             session_results: Vec::new(),
+            proposal: None,
             current_session: None,
             command_ids: CommandIds::default(),
             last_emergency_stop: None,
@@ -284,12 +290,14 @@ impl Bridge {
                     user_id,
                     cluster,
                     level,
+                    proposal,
                 },
             ) => {
                 let fields = crate::therapist::CommandFields {
                     user_id,
                     cluster,
                     level,
+                    proposal,
                 };
                 self.command(id, &pin, command, fields, now, out)
             }
@@ -329,7 +337,7 @@ impl Bridge {
     }
 
     /// Everything a therapist page shows, for one that just logged in.
-    pub(crate) fn therapist_snapshot(&self, id: ClientId, out: &mut Vec<Output>) {
+    pub(crate) fn therapist_snapshot(&self, id: ClientId, now: Now, out: &mut Vec<Output>) {
         out.push(Output::Send(id, ServerMessage::LoggedIn));
         if let Some(v) = self.therapist_view() {
             out.push(Output::Send(id, ServerMessage::Game(v)));
@@ -344,6 +352,10 @@ impl Bridge {
         }
         for r in &self.results {
             out.push(Output::Send(id, ServerMessage::Result(r.clone())));
+        }
+        // Only a proposal still waiting for an answer: a settled one is history.
+        if let Some(p) = self.open_proposal_view(now) {
+            out.push(Output::Send(id, ServerMessage::Proposal(p)));
         }
     }
 

@@ -1,6 +1,6 @@
 //! The game side of the core: game states, tasks, decisions, results and engagement from DDS
-//! become what each page shows; a task stays open until it is answered, replaced, or the game
-//! moves to a phase where no answer can count.
+//! become what each page shows (proposals: `proposal.rs`); a task stays open until it is
+//! answered, replaced, or the game moves to a phase where no answer can count.
 
 use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output, log};
 use crate::protocol::{DecisionView, EngagementPoint, ResultView, Role, ServerMessage, TaskView};
@@ -16,7 +16,8 @@ impl Bridge {
     pub fn dds(&mut self, input: DdsInput, now: Now) -> Vec<Output> {
         let mut out = Vec::new();
         match input {
-            DdsInput::GameState(g) => self.game_state(g, &mut out),
+            DdsInput::GameState(g) => self.game_state(g, now, &mut out),
+            DdsInput::Proposal(p) => self.proposal(p, now, &mut out),
             DdsInput::Task(t) => self.new_task(t, now, &mut out),
             DdsInput::Decision(d) => {
                 let view = DecisionView::of(&d);
@@ -52,7 +53,7 @@ impl Bridge {
         out
     }
 
-    fn game_state(&mut self, g: GameState, out: &mut Vec<Output>) {
+    fn game_state(&mut self, g: GameState, now: Now, out: &mut Vec<Output>) {
         if !g.session_id.is_empty() {
             self.current_session = Some(g.session_id.clone());
         }
@@ -68,6 +69,7 @@ impl Bridge {
             .as_ref()
             .is_some_and(|t| t.task.session_id != g.session_id);
         let phase = g.phase;
+        self.proposal_follows_game(&g, now);
         self.game = Some(g);
         // The game manager's own state after it came back says what it does now.
         if !self.gm_watch.lost() {

@@ -9,6 +9,7 @@ mod game;
 pub mod limits;
 pub mod pages;
 pub mod params;
+mod proposal;
 pub mod protocol;
 pub mod server;
 pub mod therapist;

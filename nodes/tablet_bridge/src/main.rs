@@ -7,8 +7,8 @@ use anyhow::Context as _;
 use clap::Parser;
 use node_shell::{NodeShell, ShellOptions};
 use qt_therapy_msgs::topics::{
-    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_ANSWER,
-    TABLET_TASK, THERAPIST_COMMAND,
+    ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
+    TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
 };
 use tablet_bridge::server::{Publish, serve};
 use tablet_bridge::{DdsInput, TabletBridgeParams};
@@ -94,6 +94,11 @@ async fn main() -> anyhow::Result<()> {
             shell.subscribe(SEQUENCE_RESULT, 64)?,
             dds_tx.clone(),
             DdsInput::Result,
+        );
+        forward(
+            shell.subscribe(ACTION_PROPOSAL, 64)?,
+            dds_tx.clone(),
+            DdsInput::Proposal,
         );
         forward(
             shell.subscribe(EXPECTED_ENGAGEMENT, 64)?,

@@ -16,7 +16,7 @@ const JS: &str = "text/javascript; charset=utf-8";
 const SVG: &str = "image/svg+xml";
 
 /// (path, content type, body); HTML bodies have `{{lang}}` replaced by the page language.
-const FILES: [(&str, &str, &str); 14] = [
+const FILES: [(&str, &str, &str); 15] = [
     ("/", HTML, include_str!("../assets/index.html")),
     ("/child", HTML, include_str!("../assets/child.html")),
     ("/therapist", HTML, include_str!("../assets/therapist.html")),
@@ -42,6 +42,11 @@ const FILES: [(&str, &str, &str); 14] = [
         "/assets/therapist.js",
         JS,
         include_str!("../assets/therapist.js"),
+    ),
+    (
+        "/assets/proposal.js",
+        JS,
+        include_str!("../assets/proposal.js"),
     ),
     (
         "/assets/faces/happy.svg",
@@ -114,6 +119,49 @@ mod tests {
             let stripped = body.replace("http://www.w3.org/2000/svg", "");
             for needle in ["http://", "https://", "//cdn", "@import", "url("] {
                 assert!(!stripped.contains(needle), "{path} contains {needle}");
+            }
+        }
+    }
+
+    /// Every word the pages ask for is there in every language: the literal keys of the
+    /// scripts and the HTML, and the keys the therapist page builds from the bridge's names.
+    #[test]
+    fn every_key_the_pages_use_is_translated() {
+        let pages = Pages::new("en");
+        let i18n = &pages.get("/assets/i18n.js").expect("i18n").body;
+        let (en, de) = i18n.split_once("\n  de: {").expect("en, then de");
+        let mut keys: Vec<String> = Vec::new();
+        // i18n.js defines the words (its comment shows `data-i18n="key"`); the rest use them.
+        for path in pages.paths().filter(|p| *p != "/assets/i18n.js") {
+            let body = &pages.get(path).expect(path).body;
+            for (open, close) in [("t(\"", "\")"), ("data-i18n=\"", "\"")] {
+                for (i, _) in body.match_indices(open) {
+                    // `t(` itself, not the end of `createElement(`.
+                    let before = body[..i].chars().next_back().unwrap_or(' ');
+                    if before.is_alphanumeric() || before == '_' || before == '.' {
+                        continue;
+                    }
+                    let rest = &body[i + open.len()..];
+                    // `t("phase_" + ...)` builds its key: only whole literals count here.
+                    if let Some(end) = rest.find('"')
+                        && rest[end..].starts_with(close)
+                    {
+                        keys.push(rest[..end].to_string());
+                    }
+                }
+            }
+        }
+        assert!(keys.len() > 40, "{keys:?}");
+        let statuses = ["accepted", "replaced", "timed_out"];
+        keys.extend(statuses.map(|s| format!("proposal_{s}")));
+        keys.extend(sequence_game::Feedback::ALL.map(|f| format!("fb_{}", f.name())));
+        keys.extend(sequence_game::Action::ALL.map(|a| a.key().to_string()));
+        for key in keys {
+            for (lang, words) in [("en", en), ("de", de)] {
+                assert!(
+                    words.contains(&format!(" {key}: \"")),
+                    "{lang} lacks {key:?}"
+                );
             }
         }
     }

@@ -2,14 +2,21 @@
 //! parsed strictly (unknown types and fields, wrong types and missing fields are rejected with
 //! serde's reason); outgoing ones are views of the DDS messages the pages need.
 
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, Tally};
+use qt_therapy_msgs::{
+    ActionProposal, Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, Tally,
+};
 use sequence_game::{ACTION_COUNT, Action, Feedback};
+use serde::{Deserialize, Serialize};
 
 /// A feedback code's name, `unknown` outside 0..=2.
 fn feedback_name(feedback: u8) -> &'static str {
     Feedback::new(feedback.into()).map_or("unknown", Feedback::name)
 }
-use serde::{Deserialize, Serialize};
+
+/// An action code's key (`level_1` .. `challenge`), `unknown` outside 0..=4.
+fn action_key(action: u8) -> &'static str {
+    Action::new(action.into()).map_or("unknown", Action::key)
+}
 
 /// Which page a connection belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -42,6 +49,10 @@ pub enum ClientMessage {
         cluster: Option<i32>,
         #[serde(default)]
         level: Option<u8>,
+        /// The step of the proposal this command answers (the proposal card sends it): the
+        /// bridge refuses the command once that proposal is no longer open.
+        #[serde(default)]
+        proposal: Option<u8>,
     },
 }
 
@@ -55,6 +66,12 @@ pub enum CommandKind {
     Stop,
     OverrideLevel,
     EmergencyStop,
+    /// The next sequence repeats the level with encouraging feedback.
+    OverrideEncouraging,
+    /// The next sequence repeats the level with challenging feedback.
+    OverrideChallenging,
+    /// Carry out the action the game manager proposes now.
+    AcceptProposal,
 }
 
 impl CommandKind {
@@ -66,7 +83,40 @@ impl CommandKind {
             CommandKind::Stop => qt_therapy_msgs::TherapistCommand::STOP,
             CommandKind::OverrideLevel => qt_therapy_msgs::TherapistCommand::OVERRIDE_LEVEL,
             CommandKind::EmergencyStop => qt_therapy_msgs::TherapistCommand::EMERGENCY_STOP,
+            CommandKind::OverrideEncouraging => {
+                qt_therapy_msgs::TherapistCommand::OVERRIDE_ENCOURAGING
+            }
+            CommandKind::OverrideChallenging => {
+                qt_therapy_msgs::TherapistCommand::OVERRIDE_CHALLENGING
+            }
+            CommandKind::AcceptProposal => qt_therapy_msgs::TherapistCommand::ACCEPT_PROPOSAL,
         }
+    }
+
+    /// The command's name in the page protocol (`override_level`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            CommandKind::Start => "start",
+            CommandKind::Pause => "pause",
+            CommandKind::Resume => "resume",
+            CommandKind::Stop => "stop",
+            CommandKind::OverrideLevel => "override_level",
+            CommandKind::EmergencyStop => "emergency_stop",
+            CommandKind::OverrideEncouraging => "override_encouraging",
+            CommandKind::OverrideChallenging => "override_challenging",
+            CommandKind::AcceptProposal => "accept_proposal",
+        }
+    }
+
+    /// Whether the command can answer a proposal (accept it, or replace it by its action).
+    pub fn answers_proposal(self) -> bool {
+        matches!(
+            self,
+            CommandKind::OverrideLevel
+                | CommandKind::OverrideEncouraging
+                | CommandKind::OverrideChallenging
+                | CommandKind::AcceptProposal
+        )
     }
 }
 
@@ -113,6 +163,8 @@ pub enum ServerMessage {
     },
     Decision(DecisionView),
     Result(ResultView),
+    /// Therapist page only: the action the game manager proposes, or what became of it.
+    Proposal(ProposalView),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -255,6 +307,112 @@ impl DecisionView {
     }
 }
 
+/// The status of an `ActionProposal` by name (`proposed`, `accepted`, `replaced`,
+/// `timed_out`, `withdrawn`), which the page translates; `unknown` otherwise.
+pub fn proposal_status_name(status: u8) -> &'static str {
+    match status {
+        ActionProposal::PROPOSED => "proposed",
+        ActionProposal::ACCEPTED => "accepted",
+        ActionProposal::REPLACED => "replaced",
+        ActionProposal::TIMED_OUT => "timed_out",
+        ActionProposal::WITHDRAWN => "withdrawn",
+        _ => "unknown",
+    }
+}
+
+/// The actions the therapist may choose in `p`'s state, as keys in index order: no
+/// feedback in the start state (sequence 1 has no level to repeat).
+pub fn proposal_choices(p: &ActionProposal) -> Vec<&'static str> {
+    let allowed = p
+        .state
+        .to_state()
+        .map_or(&Action::ALL[..3], |s| s.allowed_actions());
+    allowed.iter().map(|a| a.key()).collect()
+}
+
+/// A proposal as the therapist page shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ProposalView {
+    pub session_id: String,
+    /// The sequence the proposed action sets up.
+    pub step: u8,
+    /// (L, F, PS) before the action.
+    pub state: [i16; 3],
+    pub action: u8,
+    /// The proposed action's key (`level_1` .. `challenge`), which the page translates.
+    pub action_name: &'static str,
+    pub level: u8,
+    pub feedback: u8,
+    pub feedback_name: &'static str,
+    pub temperature: f64,
+    /// The user model's sigma of P(success) after the action; null without a user model.
+    pub success_std: Option<f64>,
+    /// Why it is proposed, in the game manager's words.
+    pub reason: String,
+    /// Seconds the therapist was given.
+    pub countdown: f32,
+    /// Seconds left when the bridge sent this view (the page counts down from its arrival).
+    pub remaining: f64,
+    /// `proposed` while open; then `accepted`, `replaced`, `timed_out` or `withdrawn`.
+    pub status: &'static str,
+    /// Still waiting for the therapist.
+    pub open: bool,
+    /// The actions (keys) the therapist may choose instead, in index order.
+    pub choices: Vec<&'static str>,
+    /// Settled and played (accepted, replaced, timed out): what plays; null otherwise.
+    pub played_action_name: Option<&'static str>,
+    pub played_level: u8,
+    pub played_feedback: u8,
+    pub played_feedback_name: &'static str,
+    /// The therapist command that settled it (0 when it ran out or was withdrawn).
+    pub command_id: u64,
+    /// Seconds from the proposal to the therapist's answer.
+    pub response_time: f32,
+}
+
+impl ProposalView {
+    /// `p` with `remaining` seconds left on its countdown (as the bridge counts it).
+    pub fn of(p: &ActionProposal, remaining: f64) -> Self {
+        let played = matches!(
+            p.status,
+            ActionProposal::ACCEPTED | ActionProposal::REPLACED | ActionProposal::TIMED_OUT
+        );
+        let open = p.status == ActionProposal::PROPOSED;
+        ProposalView {
+            session_id: p.session_id.clone(),
+            step: p.step,
+            state: [
+                p.state.level.into(),
+                p.state.feedback.into(),
+                p.state.previous_score.into(),
+            ],
+            action: p.action,
+            action_name: action_key(p.action),
+            level: p.level,
+            feedback: p.feedback,
+            feedback_name: feedback_name(p.feedback),
+            temperature: p.temperature,
+            success_std: (p.success_std >= 0.0).then_some(p.success_std),
+            reason: p.reason.clone(),
+            countdown: p.countdown,
+            remaining: if open {
+                remaining.clamp(0.0, f64::from(p.countdown))
+            } else {
+                0.0
+            },
+            status: proposal_status_name(p.status),
+            open,
+            choices: proposal_choices(p),
+            played_action_name: played.then(|| action_key(p.played_action)),
+            played_level: p.played_level,
+            played_feedback: p.played_feedback,
+            played_feedback_name: feedback_name(p.played_feedback),
+            command_id: p.command_id,
+            response_time: p.response_time,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ResultView {
     pub session_id: String,
@@ -322,9 +480,136 @@ mod tests {
                 command: CommandKind::OverrideLevel,
                 user_id: None,
                 cluster: None,
-                level: Some(2)
+                level: Some(2),
+                proposal: None,
             })
         );
+        assert_eq!(
+            parse_client_message(
+                r#"{"type":"command","pin":"1","command":"accept_proposal","proposal":4}"#
+            ),
+            Ok(ClientMessage::Command {
+                pin: "1".into(),
+                command: CommandKind::AcceptProposal,
+                user_id: None,
+                cluster: None,
+                level: None,
+                proposal: Some(4),
+            })
+        );
+    }
+
+    #[test]
+    fn every_command_has_its_code_and_its_protocol_name() {
+        use qt_therapy_msgs::TherapistCommand as C;
+        let all = [
+            (CommandKind::Start, C::START),
+            (CommandKind::Pause, C::PAUSE),
+            (CommandKind::Resume, C::RESUME),
+            (CommandKind::Stop, C::STOP),
+            (CommandKind::OverrideLevel, C::OVERRIDE_LEVEL),
+            (CommandKind::EmergencyStop, C::EMERGENCY_STOP),
+            (CommandKind::OverrideEncouraging, C::OVERRIDE_ENCOURAGING),
+            (CommandKind::OverrideChallenging, C::OVERRIDE_CHALLENGING),
+            (CommandKind::AcceptProposal, C::ACCEPT_PROPOSAL),
+        ];
+        for (kind, code) in all {
+            assert_eq!(kind.code(), code, "{kind:?}");
+            let json = serde_json::to_value(kind).expect("serialises");
+            assert_eq!(json, kind.name(), "{kind:?}");
+            let text = format!(
+                r#"{{"type":"command","pin":"1","command":"{}"}}"#,
+                kind.name()
+            );
+            assert!(
+                matches!(parse_client_message(&text), Ok(ClientMessage::Command { command, .. }) if command == kind)
+            );
+        }
+        let codes: Vec<u8> = all.iter().map(|(k, _)| k.code()).collect();
+        assert_eq!(codes, (0..=8).collect::<Vec<u8>>(), "every code once");
+        let answering: Vec<&str> = all
+            .iter()
+            .filter(|(k, _)| k.answers_proposal())
+            .map(|(k, _)| k.name())
+            .collect();
+        assert_eq!(
+            answering,
+            [
+                "override_level",
+                "override_encouraging",
+                "override_challenging",
+                "accept_proposal"
+            ]
+        );
+    }
+
+    #[test]
+    fn a_proposal_view_names_what_is_proposed_and_what_became_of_it() {
+        use qt_therapy_msgs::{ActionProposal, BehaviourState};
+        let open = ActionProposal {
+            session_id: "s".into(),
+            step: 4,
+            state: BehaviourState {
+                level: 2,
+                feedback: 1,
+                previous_score: -2,
+            },
+            action: 4,
+            level: 2,
+            feedback: 2,
+            temperature: 235.0,
+            success_std: 0.31,
+            reason: "unsure".into(),
+            countdown: 10.0,
+            status: ActionProposal::PROPOSED,
+            ..Default::default()
+        };
+        let v = ProposalView::of(&open, 12.5);
+        assert_eq!(v.remaining, 10.0, "never more than the countdown");
+        assert_eq!(ProposalView::of(&open, -3.0).remaining, 0.0);
+        assert_eq!(
+            (v.action_name, v.feedback_name, v.status, v.open),
+            ("challenge", "challenging", "proposed", true)
+        );
+        assert_eq!(v.state, [2, 1, -2]);
+        assert_eq!(v.played_action_name, None, "nothing plays yet");
+        let json = serde_json::to_value(ServerMessage::Proposal(v)).expect("serialises");
+        assert_eq!(json["type"], "proposal");
+        assert_eq!(json["success_std"], 0.31);
+        assert_eq!(json["choices"].as_array().map(Vec::len), Some(5));
+
+        let replaced = ActionProposal {
+            status: ActionProposal::REPLACED,
+            played_action: 0,
+            played_level: 1,
+            played_feedback: 0,
+            success_std: -1.0,
+            command_id: 77,
+            response_time: 2.5,
+            ..open.clone()
+        };
+        let v = ProposalView::of(&replaced, 5.0);
+        assert_eq!((v.status, v.open, v.remaining), ("replaced", false, 0.0));
+        assert_eq!(
+            (v.played_action_name, v.played_level, v.played_feedback_name),
+            (Some("level_1"), 1, "none")
+        );
+        assert_eq!((v.command_id, v.response_time), (77, 2.5));
+        let json = serde_json::to_value(&v).expect("serialises");
+        assert!(json["success_std"].is_null(), "-1: no user model");
+        for (status, name, plays) in [
+            (ActionProposal::ACCEPTED, "accepted", true),
+            (ActionProposal::TIMED_OUT, "timed_out", true),
+            (ActionProposal::WITHDRAWN, "withdrawn", false),
+        ] {
+            let p = ActionProposal {
+                status,
+                ..replaced.clone()
+            };
+            let v = ProposalView::of(&p, 0.0);
+            assert_eq!((v.status, v.played_action_name.is_some()), (name, plays));
+        }
+        assert_eq!(proposal_status_name(9), "unknown");
     }
 
     #[test]

@@ -44,12 +44,14 @@ pub struct CommandFields {
     pub user_id: Option<String>,
     pub cluster: Option<i32>,
     pub level: Option<u8>,
+    /// The step of the proposal the command answers (the proposal card's buttons).
+    pub proposal: Option<u8>,
 }
 
 impl Bridge {
     pub(crate) fn login(&mut self, id: ClientId, pin: &str, now: Now, out: &mut Vec<Output>) {
         if self.clients.get(&id).is_some_and(|c| c.logged_in) {
-            self.therapist_snapshot(id, out);
+            self.therapist_snapshot(id, now, out);
             return;
         }
         if !self.pin_budget.has_token(now.monotonic) {
@@ -67,7 +69,7 @@ impl Bridge {
             c.pin_failures = 0;
         }
         out.push(log(Level::INFO, format!("page {id}: therapist logged in")));
-        self.therapist_snapshot(id, out);
+        self.therapist_snapshot(id, now, out);
     }
 
     fn wrong_pin(&mut self, id: ClientId, now: Now, out: &mut Vec<Output>) {
@@ -115,6 +117,10 @@ impl Bridge {
                 return;
             }
         };
+        if let Err(reason) = self.check_proposal_answer(kind, fields.proposal, &session) {
+            self.reject(id, reason, out);
+            return;
+        }
         if kind == CommandKind::EmergencyStop
             && let Some((s, at)) = &self.last_emergency_stop
             && *s == session
@@ -202,10 +208,10 @@ impl Bridge {
 
 /// Which optional fields each command needs and allows.
 fn check_fields(kind: CommandKind, f: &CommandFields) -> Result<(), String> {
-    let name = serde_json::to_value(kind)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default();
+    let name = kind.name();
+    if f.proposal.is_some() && !kind.answers_proposal() {
+        return Err(format!("{name} answers no proposal"));
+    }
     match kind {
         CommandKind::Start => {
             if f.level.is_some() {
@@ -226,7 +232,7 @@ fn check_fields(kind: CommandKind, f: &CommandFields) -> Result<(), String> {
                 None => Err("override_level needs a level 1..=3".into()),
             }
         }
-        _ if *f != CommandFields::default() => {
+        _ if f.user_id.is_some() || f.cluster.is_some() || f.level.is_some() => {
             Err(format!("{name} takes no user_id, cluster or level"))
         }
         _ => Ok(()),

@@ -7,8 +7,11 @@
 //! to check what crossed). It is the camera too: 30 fps of SYNTHETIC faces looking at the robot
 //! (the classifier's generator) for the real classifier. Bad input from both pages is refused
 //! on the way, and mid-session the bridge itself is SIGKILLed: the launcher respawns it and
-//! both pages reconnect to it by themselves. Everything runs inside one private loopback-only network namespace: the test
-//! re-runs itself in there.
+//! both pages reconnect to it by themselves. Supervised autonomy is on and proposes every
+//! decision of the policy on the therapist page: one is accepted, one replaced by feedback, one
+//! by another level, one left to run out, the rest accepted at once, and what the game manager
+//! says of each over DDS must be what the page did. Everything runs inside one private
+//! loopback-only network namespace: the test re-runs itself in there.
 //!
 //! Needs Debian's `chromium` and `chromium-driver` (skips with a message where they are absent)
 //! and the suite's binaries (`cargo build --workspace --bins`; tests/run.sh builds them first).
@@ -19,9 +22,12 @@ mod support;
 use node_shell::{NoParameters, NodeShell, ShellOptions, header_now};
 use openface::synthetic::{SyntheticSpec, generate};
 use qt_therapy_msgs::topics::{
-    DECISION, OPENFACE_FEATURES, ROBOT_SPEECH, TABLET_ANSWER, TABLET_TASK,
+    ACTION_PROPOSAL, DECISION, OPENFACE_FEATURES, ROBOT_SPEECH, TABLET_ANSWER, TABLET_TASK,
+    THERAPIST_COMMAND,
 };
-use qt_therapy_msgs::{Decision, OpenFaceFeatures, TabletAnswer, TabletTask};
+use qt_therapy_msgs::{
+    ActionProposal, Decision, OpenFaceFeatures, TabletAnswer, TabletTask, TherapistCommand,
+};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -38,10 +44,15 @@ const WAIT: Duration = Duration::from_secs(30);
 /// The policy pretrains its Q-tables before it serves; the game waits for it.
 const STARTUP: Duration = Duration::from_secs(120);
 const EMOTIONS: [&str; 4] = ["happy", "disgusted", "sad", "angry"];
-/// The robot talks 20x faster than real; the child still gets 30 s per answer.
+/// The robot talks 20x faster than real; the child still gets 30 s per answer. Supervised
+/// autonomy proposes every decision of the policy (every temperature is above 0) on the
+/// therapist page, with 200 s x 0.05 = 10 s to answer.
 const GAME_ARGS: &str = "--param time_scale:=0.05 --param answer_timeout_s:=600 \
      --param engagement_wait_s:=0.2 --param policy_startup_wait_s:=120 --param policy_deadline_s:=10 \
-     --param seed:=11";
+     --param seed:=11 --param supervised_autonomy:=true --param propose_above_temperature:=0.0 \
+     --param proposal_countdown_s:=200.0";
+/// The proposal's countdown as the page gets it (proposal_countdown_s x time_scale).
+const COUNTDOWN_S: f32 = 10.0;
 /// Sequence answered wrongly on purpose; before answering sequence OVERRIDE_AT the therapist
 /// pauses, overrides the next level to 3 and resumes.
 const WRONG_AT: usize = 5;
@@ -49,6 +60,13 @@ const OVERRIDE_AT: usize = 2;
 /// While sequence BRIDGE_KILLED_AT waits for the child's answer, the tablet bridge is
 /// SIGKILLed; the launcher respawns it (5 s) and both pages reconnect by themselves.
 const BRIDGE_KILLED_AT: usize = 8;
+/// The policy's proposal for sequence RUN_OUT_AT is left to run out; REPLACED_BY_FEEDBACK_AT's
+/// is replaced by encouraging (or challenging) feedback, REPLACED_BY_LEVEL_AT's by another
+/// level; every other one is accepted at once. Sequence OVERRIDE_AT + 1 is not proposed: the
+/// therapist set it before it was decided.
+const RUN_OUT_AT: usize = 2;
+const REPLACED_BY_FEEDBACK_AT: usize = 4;
+const REPLACED_BY_LEVEL_AT: usize = 6;
 /// The suite's binaries the launch file starts, besides this crate's own.
 const SUITE_BINARIES: [&str; 6] = [
     "launch",
@@ -128,6 +146,8 @@ struct Heard {
     tasks: Vec<(usize, TabletTask)>,
     decisions: Vec<Decision>,
     answers: Vec<TabletAnswer>,
+    proposals: Vec<ActionProposal>,
+    commands: Vec<TherapistCommand>,
 }
 
 /// The test's own DDS participant: listens, and plays the camera.
@@ -216,6 +236,10 @@ impl Ears {
         listen(decisions, &heard, |h, d| h.decisions.push(d));
         let answers = shell.subscribe(TABLET_ANSWER, 64).expect("answers");
         listen(answers, &heard, |h, a| h.answers.push(a));
+        let proposals = shell.subscribe(ACTION_PROPOSAL, 64).expect("proposals");
+        listen(proposals, &heard, |h, p| h.proposals.push(p));
+        let commands = shell.subscribe(THERAPIST_COMMAND, 64).expect("commands");
+        listen(commands, &heard, |h, c| h.commands.push(c));
         camera(&mut shell);
         Ears { heard, shell }
     }
@@ -233,6 +257,20 @@ impl Ears {
                     .filter(|(_, t)| session.is_none_or(|s| t.session_id == s))
                     .nth(k - 1)
                     .map(|(_, t)| t.clone())
+            })
+        })
+        .await
+    }
+
+    /// The first proposal message of `session` for sequence `step` with `status`, once heard.
+    async fn proposal(&self, session: &str, step: u8, status: u8) -> ActionProposal {
+        let what = format!("proposal {step} of {session} with status {status} over DDS");
+        until(&what, WAIT, || async {
+            self.with(|h| {
+                h.proposals
+                    .iter()
+                    .find(|p| p.session_id == session && p.step == step && p.status == status)
+                    .cloned()
             })
         })
         .await
@@ -348,7 +386,18 @@ async fn inner() {
     assert_eq!(s["sequences_played"], 10, "{s}");
     assert_eq!(s["correct"], 9, "{s}");
     assert_eq!((&s["score"], &s["max_score"]), (&json!(score), &json!(max)));
-    assert_eq!(s["overrides"], 1, "{s}");
+    // The therapist's own override and the two proposals replaced.
+    assert_eq!(s["overrides"], 3, "{s}");
+    assert_eq!(
+        (
+            &s["proposals"],
+            &s["proposals_accepted"],
+            &s["proposals_replaced"],
+            &s["proposals_timed_out"]
+        ),
+        (&json!(9), &json!(6), &json!(2), &json!(1)),
+        "{s}"
+    );
     assert_eq!(s["policy_fallbacks"], 0, "{s}");
     assert_eq!(s["timeouts"], 0, "{s}");
     assert_eq!(
@@ -425,6 +474,14 @@ async fn start_session(therapist: &Page, user: &str, cluster: i32) {
         },
     )
     .await;
+}
+
+/// The session the therapist page shows.
+async fn session_shown(therapist: &Page) -> String {
+    let label = therapist.text("#session-label").await;
+    let id = label.rsplit(' ').next().unwrap_or_default().to_string();
+    assert!(id.starts_with("tablet-"), "session label {label:?}");
+    id
 }
 
 /// Waits until the child page offers `task`.
@@ -549,6 +606,259 @@ async fn newest_result(therapist: &Page) -> Value {
             vec![],
         )
         .await
+}
+
+/// What the therapist does with a proposal on the page.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Reply {
+    Accept,
+    /// Nothing: the countdown runs out and the proposal is carried out.
+    RunOut,
+    /// Encourage (Challenge if encouraging is what the robot proposes).
+    Feedback,
+    /// Another level than the proposed one.
+    Level,
+}
+
+/// What the therapist does with the policy's proposal for sequence `k`, if it is proposed.
+fn reply_to(k: usize) -> Option<Reply> {
+    match k {
+        _ if k == OVERRIDE_AT + 1 => None,
+        RUN_OUT_AT => Some(Reply::RunOut),
+        REPLACED_BY_FEEDBACK_AT => Some(Reply::Feedback),
+        REPLACED_BY_LEVEL_AT => Some(Reply::Level),
+        _ => Some(Reply::Accept),
+    }
+}
+
+/// The seconds the proposal card's countdown shows.
+async fn countdown_shown(therapist: &Page) -> f64 {
+    let text = therapist.text("#proposal-countdown").await;
+    let number = text.split_whitespace().next().unwrap_or_default();
+    number
+        .parse()
+        .unwrap_or_else(|_| panic!("countdown {text:?}"))
+}
+
+/// The proposal card's buttons: (id, disabled).
+async fn proposal_buttons(therapist: &Page) -> Vec<(String, bool)> {
+    let v = therapist
+        .js(
+            "return [...document.querySelectorAll('#proposal button')].map(b => [b.id, b.disabled]);",
+            vec![],
+        )
+        .await;
+    serde_json::from_value(v).expect("buttons")
+}
+
+/// The policy's proposal for sequence `k` appears on the therapist page (in words, with its
+/// reason and a countdown), the therapist answers it with `reply`, the page shows what became
+/// of it, and the game manager says over DDS that it settled as the page did (status, what
+/// plays, the command that settled it). Returns the settled message.
+async fn answer_proposal(
+    therapist: &Page,
+    child: &Page,
+    ears: &Ears,
+    session: &str,
+    k: usize,
+    reply: Reply,
+    shots: &Path,
+) -> ActionProposal {
+    let step = k as u8;
+    let open = format!("#proposal.open[data-step=\"{k}\"][data-status=proposed]");
+    therapist.wait_count(&open, 1, WAIT).await;
+    let proposed = ears.proposal(session, step, ActionProposal::PROPOSED).await;
+    assert_eq!(proposed.countdown, COUNTDOWN_S, "{proposed:?}");
+    let what = therapist.text("#proposal-what").await;
+    let repeat = if proposed.action >= 3 { " again" } else { "" };
+    assert!(
+        what.starts_with(&format!("Sequence {k}: Level {}{repeat}, ", proposed.level)),
+        "{what} vs {proposed:?}"
+    );
+    let why = therapist.text("#proposal-why").await;
+    assert!(
+        why.contains(&proposed.reason) && why.contains("T "),
+        "{why}"
+    );
+    // Feedback repeats the level: not offered on the first sequence.
+    for (id, disabled) in proposal_buttons(therapist).await {
+        let feedback = id == "proposal-encourage" || id == "proposal-challenge";
+        assert_eq!(disabled, k == 1 && feedback, "{id} at sequence {k}");
+    }
+    if k == 1 {
+        therapist
+            .screenshot(shots, "therapist_proposal_1280x800")
+            .await;
+    }
+    if k == 7 {
+        therapist
+            .screenshot(shots, "therapist_proposal_800x1280")
+            .await;
+    }
+    // (button, status, what the card then says, the command it sends: code and level)
+    let (button, status, outcome, command) = match reply {
+        Reply::Accept => (
+            Some("#proposal-accept".to_string()),
+            ActionProposal::ACCEPTED,
+            "Accepted: ",
+            Some((TherapistCommand::ACCEPT_PROPOSAL, 0)),
+        ),
+        Reply::RunOut => (None, ActionProposal::TIMED_OUT, "Ran out: ", None),
+        Reply::Feedback if proposed.action == 3 => (
+            Some("#proposal-challenge".into()),
+            ActionProposal::REPLACED,
+            "Replaced by ",
+            Some((TherapistCommand::OVERRIDE_CHALLENGING, 0)),
+        ),
+        Reply::Feedback => (
+            Some("#proposal-encourage".into()),
+            ActionProposal::REPLACED,
+            "Replaced by ",
+            Some((TherapistCommand::OVERRIDE_ENCOURAGING, 0)),
+        ),
+        Reply::Level => {
+            let level = if proposed.level == 1 { 2 } else { 1 };
+            (
+                Some(format!("#proposal-level-{level}")),
+                ActionProposal::REPLACED,
+                "Replaced by ",
+                Some((TherapistCommand::OVERRIDE_LEVEL, level)),
+            )
+        }
+    };
+    match &button {
+        Some(b) => therapist.click(b).await,
+        None => run_out(therapist, child, ears, &proposed).await,
+    }
+    let settled_card = format!(
+        "#proposal:not(.open)[data-step=\"{k}\"][data-status={}]",
+        status_name(status)
+    );
+    therapist.wait_count(&settled_card, 1, WAIT).await;
+    therapist
+        .wait_text("#proposal-outcome", outcome, WAIT)
+        .await;
+    assert!(
+        proposal_buttons(therapist).await.iter().all(|(_, d)| *d),
+        "every button is disabled once it is settled"
+    );
+    if k == REPLACED_BY_FEEDBACK_AT {
+        therapist
+            .screenshot(shots, "therapist_proposal_replaced_1280x800")
+            .await;
+    }
+
+    let settled = ears.proposal(session, step, status).await;
+    let played = (
+        settled.played_action,
+        settled.played_level,
+        settled.played_feedback,
+    );
+    let response = f64::from(settled.response_time);
+    match command {
+        None => {
+            assert_eq!(played, (proposed.action, proposed.level, proposed.feedback));
+            assert_eq!(settled.command_id, 0);
+            assert!(response >= 0.95 * f64::from(COUNTDOWN_S), "{settled:?}");
+        }
+        Some((code, level)) => {
+            let sent = ears.with(|h| {
+                h.commands
+                    .iter()
+                    .find(|c| c.session_id == session && c.command_id == settled.command_id)
+                    .cloned()
+            });
+            let sent = sent.unwrap_or_else(|| panic!("no command {}", settled.command_id));
+            assert_eq!((sent.command, sent.level), (code, level), "{settled:?}");
+            assert!(response < f64::from(COUNTDOWN_S), "{settled:?}");
+            let expected = match code {
+                TherapistCommand::ACCEPT_PROPOSAL => {
+                    (proposed.action, proposed.level, proposed.feedback)
+                }
+                // Feedback repeats the level the state holds.
+                TherapistCommand::OVERRIDE_ENCOURAGING => (3, proposed.state.level, 1),
+                TherapistCommand::OVERRIDE_CHALLENGING => (4, proposed.state.level, 2),
+                _ => (level - 1, level, 0),
+            };
+            assert_eq!(played, expected, "{settled:?}");
+        }
+    }
+    // The card named what plays.
+    let shown = therapist.text("#proposal-outcome").await;
+    assert!(
+        shown.contains(&format!("Level {}", settled.played_level)),
+        "{shown} vs {settled:?}"
+    );
+    settled
+}
+
+/// The proposal's status as the page names it.
+fn status_name(status: u8) -> &'static str {
+    match status {
+        ActionProposal::PROPOSED => "proposed",
+        ActionProposal::ACCEPTED => "accepted",
+        ActionProposal::REPLACED => "replaced",
+        ActionProposal::TIMED_OUT => "timed_out",
+        _ => "withdrawn",
+    }
+}
+
+/// Lets `proposed` run out: the page counts down on the tablet's clock; a therapist page
+/// logging in meanwhile gets it with the seconds left; the child page gets nothing of it (a
+/// child socket open from now until after it ran out).
+async fn run_out(therapist: &Page, child: &Page, ears: &Ears, proposed: &ActionProposal) {
+    let first = countdown_shown(therapist).await;
+    assert!(
+        first > 0.0 && first <= f64::from(COUNTDOWN_S),
+        "countdown {first}"
+    );
+    // Open until 2.5 s after the countdown the page shows (rounded up) ran out.
+    let window_ms = (first * 1000.0) as u64 + 2500;
+    let child_socket = child.raw_socket("/ws/child", vec![], window_ms);
+    let therapist_side = async {
+        tokio::time::sleep(Duration::from_millis(2500)).await;
+        let later = countdown_shown(therapist).await;
+        assert!(later < first && later > 0.0, "{first} s then {later} s");
+        let got = therapist
+            .raw_socket(
+                "/ws/therapist",
+                vec![json!({"type": "login", "pin": PIN})],
+                800,
+            )
+            .await;
+        let p = got
+            .iter()
+            .find(|m| m["type"] == "proposal")
+            .unwrap_or_else(|| panic!("no proposal after login: {got:?}"));
+        assert_eq!(
+            (&p["step"], &p["open"]),
+            (&json!(proposed.step), &json!(true))
+        );
+        let left = p["remaining"].as_f64().expect("remaining");
+        assert!(
+            left > 0.0 && left < f64::from(COUNTDOWN_S) - 2.0,
+            "{left} s left"
+        );
+    };
+    let (child_got, ()) = tokio::join!(child_socket, therapist_side);
+    let timed_out = ears.with(|h| {
+        h.proposals.iter().any(|p| {
+            p.session_id == proposed.session_id
+                && p.step == proposed.step
+                && p.status == ActionProposal::TIMED_OUT
+        })
+    });
+    assert!(timed_out, "ran out while the child socket was open");
+    assert!(
+        child_got.iter().any(|m| m["type"] == "game"),
+        "{child_got:?}"
+    );
+    assert!(
+        !child_got
+            .iter()
+            .any(|m| m["type"] == "proposal" || m.to_string().contains(&proposed.reason)),
+        "the child page got a proposal: {child_got:?}"
+    );
 }
 
 /// Bad input from both pages while task `current` is open (`previous` was answered with
@@ -704,12 +1014,25 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     child.wait_text("#prompt", "Listen to QT", WAIT).await;
 
     start_session(&therapist, "child-7", 0).await;
-    let first = ears.task(None, 1).await;
-    let session_id = first.session_id.clone();
+    let session_id = session_shown(&therapist).await;
     let mut tasks: Vec<(TabletTask, Vec<String>)> = Vec::new();
     let (mut score, mut max) = (0i32, 0i32);
     for k in 1..=10 {
+        let settled = match reply_to(k) {
+            Some(reply) => {
+                let p = answer_proposal(&therapist, &child, ears, &session_id, k, reply, shots);
+                Some(p.await)
+            }
+            None => None,
+        };
         let task = ears.task(Some(&session_id), k).await;
+        if let Some(p) = &settled {
+            assert_eq!(
+                usize::from(task.length),
+                2 * usize::from(p.played_level) + 1,
+                "sequence {k} plays what the proposal settled on: {p:?}"
+            );
+        }
         wait_for_task_on_child(&child, &task).await;
         let said = ears.said(&task).await;
         if k == 6 {
@@ -782,14 +1105,17 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
             (&row["said"], &row["tapped"]),
             (&json!(said), &json!(tapped))
         );
-        let overridden = k == OVERRIDE_AT + 1;
+        let replaced = settled
+            .as_ref()
+            .is_some_and(|p| p.status == ActionProposal::REPLACED);
+        let overridden = k == OVERRIDE_AT + 1 || replaced;
         let level_cell = if overridden {
             format!("{level} *")
         } else {
             level.to_string()
         };
         assert_eq!(row["level"], json!(level_cell), "{row}");
-        if overridden {
+        if k == OVERRIDE_AT + 1 {
             assert_eq!(level, 3, "the therapist's override beats the policy");
         }
         let l = level as i32;
@@ -865,9 +1191,40 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
         }
     }
 
-    // A second session, emergency-stopped while the robot talks: the robot goes silent at once
-    // (an empty utterance, then nothing) and the page shows it.
+    // Every decision of the policy was proposed once and settled once; the sequence the
+    // therapist had set was not proposed.
+    let proposals: Vec<(u8, u8)> = ears.with(|h| {
+        h.proposals
+            .iter()
+            .filter(|p| p.session_id == session_id)
+            .map(|p| (p.step, p.status))
+            .collect()
+    });
+    for step in 1..=10u8 {
+        let of_step: Vec<u8> = proposals
+            .iter()
+            .filter(|(s, _)| *s == step)
+            .map(|(_, status)| *status)
+            .collect();
+        let expected = match reply_to(usize::from(step)) {
+            None => vec![],
+            Some(Reply::Accept) => vec![ActionProposal::PROPOSED, ActionProposal::ACCEPTED],
+            Some(Reply::RunOut) => vec![ActionProposal::PROPOSED, ActionProposal::TIMED_OUT],
+            Some(_) => vec![ActionProposal::PROPOSED, ActionProposal::REPLACED],
+        };
+        assert_eq!(of_step, expected, "sequence {step}: {proposals:?}");
+    }
+
+    // A second session, emergency-stopped while its first proposal waits: the robot goes
+    // silent at once (an empty utterance, then nothing), the proposal is withdrawn, and the
+    // page shows both.
     start_session(&therapist, "child-8", 1).await;
+    let stopped = session_shown(&therapist).await;
+    assert_ne!(stopped, session_id);
+    therapist
+        .wait_count("#proposal.open[data-step=\"1\"]", 1, WAIT)
+        .await;
+    ears.proposal(&stopped, 1, ActionProposal::PROPOSED).await;
     let before = ears.with(|h| h.utterances.len());
     therapist.click("#estop").await;
     therapist
@@ -880,16 +1237,16 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
         silent.is_some_and(|i| i + 1 == after.len()),
         "after the emergency stop: {after:?}"
     );
+    ears.proposal(&stopped, 1, ActionProposal::WITHDRAWN).await;
+    therapist
+        .wait_count("#proposal[data-step=\"1\"][data-status=withdrawn]", 1, WAIT)
+        .await;
+    therapist
+        .wait_text("#proposal-outcome", "Withdrawn", WAIT)
+        .await;
     therapist
         .screenshot(shots, "therapist_emergency_stopped_800x1280")
         .await;
-    let stopped = therapist.text("#session-label").await;
-    let stopped = stopped
-        .rsplit(' ')
-        .next()
-        .expect("a session label")
-        .to_string();
-    assert_ne!(stopped, session_id);
 
     for page in [therapist, child] {
         let _ = page.client.close().await;

@@ -9,6 +9,7 @@ use serde_json::json;
 
 mod child;
 mod game;
+mod proposal;
 mod therapist;
 mod watch;
 
@@ -293,6 +294,7 @@ fn random_input_never_panics_and_the_game_goes_on() {
         answer(7, &["happy", "sad", "angry"]),
         cmd(PIN, "start", json!({"user_id": "x", "cluster": 0})),
         cmd(PIN, "override_level", json!({"level": 2})),
+        cmd(PIN, "accept_proposal", json!({"proposal": 2})),
         login(PIN),
     ];
     for i in 0..20_000u64 {

@@ -1,0 +1,188 @@
+//! Supervised autonomy on the therapist page: the game manager's proposals (`ActionProposal`)
+//! are kept for the game's session and shown to logged-in therapist pages only (never the
+//! child's), with the seconds left counted on the bridge's own clock from the proposal's
+//! arrival; commands that answer a proposal are refused once it is no longer open.
+
+use crate::bridge::{Bridge, Now, Output, log};
+use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage, proposal_status_name};
+use qt_therapy_msgs::{ActionProposal, GameState};
+use std::time::Duration;
+use tracing::Level;
+
+/// The newest proposal of the game's session and when the bridge got it.
+#[derive(Debug, Clone)]
+pub(crate) struct KeptProposal {
+    pub(crate) proposal: ActionProposal,
+    /// Arrival on the bridge's monotonic clock (moved on by a pause, while the countdown waits).
+    received: Duration,
+    /// The game paused during the countdown: the game manager's countdown waits, and so does
+    /// this one (the game manager proposes again, with a new countdown, on resume).
+    paused_at: Option<Duration>,
+}
+
+impl KeptProposal {
+    pub(crate) fn is_open(&self) -> bool {
+        self.proposal.status == ActionProposal::PROPOSED
+    }
+
+    /// Seconds of its countdown left at `now` (negative once it ran out).
+    pub(crate) fn remaining(&self, now: Duration) -> f64 {
+        let until = self.paused_at.unwrap_or(now);
+        f64::from(self.proposal.countdown) - until.saturating_sub(self.received).as_secs_f64()
+    }
+
+    fn view(&self, now: Duration) -> ProposalView {
+        ProposalView::of(&self.proposal, self.remaining(now))
+    }
+}
+
+/// `a` was published before `b` (both stamped by the game manager's clock).
+fn older(a: &ActionProposal, b: &GameState) -> bool {
+    a.header.stamp.to_nanos() < b.header.stamp.to_nanos()
+}
+
+impl Bridge {
+    /// A proposal from the game manager: kept, and sent to the therapist pages.
+    pub(crate) fn proposal(&mut self, p: ActionProposal, now: Now, out: &mut Vec<Output>) {
+        // The topic keeps its history: a bridge (re)started mid-session gets the proposals of
+        // earlier sessions too, after or before the game's state. Those older than the state
+        // of another session are history; a newer one opens the next session.
+        if let Some(g) = &self.game
+            && g.session_id != p.session_id
+            && older(&p, g)
+        {
+            out.push(log(
+                Level::DEBUG,
+                format!(
+                    "proposal for sequence {} of the earlier session {:?}; ignored",
+                    p.step, p.session_id
+                ),
+            ));
+            return;
+        }
+        if let Some(k) = &self.proposal
+            && k.proposal.session_id == p.session_id
+            && p.header.stamp.to_nanos() < k.proposal.header.stamp.to_nanos()
+        {
+            out.push(log(
+                Level::DEBUG,
+                format!("an older proposal for sequence {}; ignored", p.step),
+            ));
+            return;
+        }
+        let paused = self
+            .game
+            .as_ref()
+            .is_some_and(|g| g.session_id == p.session_id && g.phase == GameState::PAUSED);
+        let kept = KeptProposal {
+            received: now.monotonic,
+            paused_at: (paused && p.status == ActionProposal::PROPOSED).then_some(now.monotonic),
+            proposal: p,
+        };
+        let p = &kept.proposal;
+        out.push(log(
+            Level::INFO,
+            format!(
+                "proposal for sequence {} of session {:?}: {} (action {}, {} s)",
+                p.step,
+                p.session_id,
+                proposal_status_name(p.status),
+                p.action,
+                p.countdown
+            ),
+        ));
+        let view = kept.view(now.monotonic);
+        self.proposal = Some(kept);
+        self.broadcast(Role::Therapist, &ServerMessage::Proposal(view), out);
+    }
+
+    /// The game's state moved on: a proposal of another session is dropped, and a pause
+    /// stops the countdown until the game goes on.
+    pub(crate) fn proposal_follows_game(&mut self, g: &GameState, now: Now) {
+        let Some(k) = self.proposal.as_mut() else {
+            return;
+        };
+        if k.proposal.session_id != g.session_id {
+            if !g.session_id.is_empty() && !older(&k.proposal, g) {
+                // A new session's first proposal before its first state: keep it.
+                return;
+            }
+            self.proposal = None;
+            return;
+        }
+        if !k.is_open() {
+            return;
+        }
+        match (g.phase == GameState::PAUSED, k.paused_at) {
+            (true, None) => k.paused_at = Some(now.monotonic),
+            (false, Some(at)) => {
+                k.received += now.monotonic.saturating_sub(at);
+                k.paused_at = None;
+            }
+            _ => {}
+        }
+    }
+
+    /// The open proposal of the game's session as a page sees it now, if there is one.
+    pub(crate) fn open_proposal_view(&self, now: Now) -> Option<ProposalView> {
+        let k = self.proposal.as_ref().filter(|k| k.is_open())?;
+        if let Some(g) = &self.game
+            && (g.session_id != k.proposal.session_id
+                || GameState::is_ended(g.phase)
+                || g.phase == GameState::IDLE)
+        {
+            return None;
+        }
+        Some(k.view(now.monotonic))
+    }
+
+    /// Whether `kind`, for `session`, may go out as an answer to the proposal of step
+    /// `answering` (the proposal card names it; plain overrides name none).
+    pub(crate) fn check_proposal_answer(
+        &self,
+        kind: CommandKind,
+        answering: Option<u8>,
+        session: &str,
+    ) -> Result<(), String> {
+        if kind != CommandKind::AcceptProposal && answering.is_none() {
+            return Ok(());
+        }
+        let Some(k) = self
+            .proposal
+            .as_ref()
+            .filter(|k| k.proposal.session_id == session)
+        else {
+            return Err(format!("no proposal is open in session {session}"));
+        };
+        let p = &k.proposal;
+        if let Some(step) = answering
+            && step != p.step
+        {
+            return Err(format!(
+                "the proposal for sequence {step} is not open (the newest is for sequence {}, {})",
+                p.step,
+                proposal_status_name(p.status)
+            ));
+        }
+        if !k.is_open() {
+            return Err(format!(
+                "the proposal for sequence {} is already settled ({})",
+                p.step,
+                proposal_status_name(p.status)
+            ));
+        }
+        let feedback = match kind {
+            CommandKind::OverrideEncouraging => "encourage",
+            CommandKind::OverrideChallenging => "challenge",
+            _ => return Ok(()),
+        };
+        if crate::protocol::proposal_choices(p).contains(&feedback) {
+            Ok(())
+        } else {
+            Err(format!(
+                "sequence {} has no level to repeat: {feedback} is not offered",
+                p.step
+            ))
+        }
+    }
+}
