@@ -31,17 +31,24 @@ fn write_params(d: &Path) {
     .expect("write params");
 }
 
-#[test]
-fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let d = dir.path();
-    write_params(d);
+/// What a run of the game manager beside the scripted peer left: their outputs, and all of it
+/// as one text for assertion messages.
+struct Played {
+    gm_err: String,
+    peer_out: String,
+    context: String,
+}
+
+/// Runs the game manager (parameters in `d`) and the peer with `peer_args` inside a loopback
+/// network namespace until the peer exits, then SIGINTs the game manager; both must exit 0.
+/// None where no namespace can be made (the test then skips, saying why).
+fn play_with_peer(d: &Path, peer_args: &str) -> Option<Played> {
     let script = format!(
         r#"
         export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR={d}
         {gm} run --sessions-dir {d}/sessions >{d}/gm.out 2>{d}/gm.err &
         G=$!
-        {peer} --session dds-1 --wrong 3 --silent 5 --override-level 3 >{d}/peer.out 2>{d}/peer.err
+        {peer} {peer_args} >{d}/peer.out 2>{d}/peer.err
         P=$?
         kill -INT $G; wait $G; RC=$?
         echo "{{\"peer\":$P,\"game_manager\":$RC}}"
@@ -50,16 +57,13 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
         gm = workspace_bin("game_manager").display(),
         peer = env!("CARGO_BIN_EXE_game_manager_test_peer"),
     );
-    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(200)) else {
-        return;
-    };
+    let out = run_in_loopback_netns(&script, Duration::from_secs(200))?;
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
-    let (gm_out, peer_out) = (read("gm.out"), read("peer.out"));
+    let (gm_out, gm_err, peer_out) = (read("gm.out"), read("gm.err"), read("peer.out"));
     let context = format!(
-        "script: {}\n{}\ngame_manager stdout:\n{gm_out}\nstderr:\n{}\npeer:\n{peer_out}\n{}",
+        "script: {}\n{}\ngame_manager stdout:\n{gm_out}\nstderr:\n{gm_err}\npeer:\n{peer_out}\n{}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr),
-        read("gm.err"),
         read("peer.err")
     );
     let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
@@ -69,9 +73,30 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
         Some((0.into(), 0.into())),
         "{context}"
     );
+    Some(Played {
+        gm_err,
+        peer_out,
+        context,
+    })
+}
+
+#[test]
+fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    write_params(d);
+    let Some(played) = play_with_peer(d, "--session dds-1 --wrong 3 --silent 5 --override-level 3")
+    else {
+        return;
+    };
+    let Played {
+        gm_err,
+        peer_out,
+        context,
+    } = played;
+    let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
 
     // The live view, logged once each: a start line, ten sequence lines, an end line.
-    let gm_err = read("gm.err");
     let live: Vec<&str> = gm_err.lines().filter(|l| l.contains(": seq ")).collect();
     assert_eq!(live.len(), 10, "{context}");
     assert!(live[2].contains("answer wrong"), "{context}");
@@ -112,7 +137,6 @@ fn a_whole_session_over_dds_is_played_recorded_and_shown_live() {
     );
     // The duplicated start was rejected and reported (GameState is keep-last-1, so the log is
     // the reliable witness here).
-    let gm_err = read("gm.err");
     assert!(
         gm_err.contains("rejected command 1 (start) for session \"dds-1\": duplicate command id 1"),
         "{context}"
@@ -164,40 +188,16 @@ fn proposals_to_the_therapist_are_accepted_replaced_or_run_out_over_dds() {
             && supervised.contains(&*models.to_string_lossy())
     );
     std::fs::write(d.join("game_manager.yaml"), supervised).expect("write params");
-    let script = format!(
-        r#"
-        export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR={d}
-        {gm} run --sessions-dir {d}/sessions >{d}/gm.out 2>{d}/gm.err &
-        G=$!
-        {peer} --session dds-sup --unsure 2,3,4,6 --proposal-replies accept,level3,wait,challenge \
-          >{d}/peer.out 2>{d}/peer.err
-        P=$?
-        kill -INT $G; wait $G; RC=$?
-        echo "{{\"peer\":$P,\"game_manager\":$RC}}"
-        "#,
-        d = d.display(),
-        gm = workspace_bin("game_manager").display(),
-        peer = env!("CARGO_BIN_EXE_game_manager_test_peer"),
-    );
-    let Some(out) = run_in_loopback_netns(&script, Duration::from_secs(200)) else {
+    let Some(Played {
+        peer_out, context, ..
+    }) = play_with_peer(
+        d,
+        "--session dds-sup --unsure 2,3,4,6 --proposal-replies accept,level3,wait,challenge",
+    )
+    else {
         return;
     };
     let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
-    let peer_out = read("peer.out");
-    let context = format!(
-        "script: {}\n{}\ngame_manager stderr:\n{}\npeer:\n{peer_out}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr),
-        read("gm.err"),
-        read("peer.err")
-    );
-    let exit = json_lines(&String::from_utf8_lossy(&out.stdout));
-    assert_eq!(
-        exit.last()
-            .map(|e| (e["peer"].clone(), e["game_manager"].clone())),
-        Some((0.into(), 0.into())),
-        "{context}"
-    );
     let peer = json_lines(&peer_out);
     let proposals: Vec<(i64, i64)> = peer
         .iter()
