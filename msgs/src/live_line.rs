@@ -132,6 +132,19 @@ pub fn proposal_asked(p: &ActionProposal) -> String {
     )
 }
 
+/// The status of an `ActionProposal` by name (`proposed`, `accepted`, `replaced`,
+/// `timed_out`, `withdrawn`), which the page translates; `unknown` otherwise.
+pub fn proposal_status_name(status: u8) -> &'static str {
+    match status {
+        ActionProposal::PROPOSED => "proposed",
+        ActionProposal::ACCEPTED => "accepted",
+        ActionProposal::REPLACED => "replaced",
+        ActionProposal::TIMED_OUT => "timed_out",
+        ActionProposal::WITHDRAWN => "withdrawn",
+        _ => "unknown",
+    }
+}
+
 /// What became of a proposal, from the message that settled it: `accepted after 2.1 s`,
 /// `replaced by L3 after 1.2 s`, `ran out after 5.0 s: played`, `withdrawn (the session
 /// ended first)`.

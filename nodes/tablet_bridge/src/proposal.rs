@@ -4,7 +4,8 @@
 //! arrival; commands that answer a proposal are refused once it is no longer open.
 
 use crate::bridge::{Bridge, Now, Output, log};
-use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage, proposal_status_name};
+use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage};
+use qt_therapy_msgs::live_line::proposal_status_name;
 use qt_therapy_msgs::{ActionProposal, GameState};
 use std::time::Duration;
 use tracing::Level;

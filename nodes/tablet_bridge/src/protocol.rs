@@ -2,6 +2,7 @@
 //! parsed strictly (unknown types and fields, wrong types and missing fields are rejected with
 //! serde's reason); outgoing ones are views of the DDS messages the pages need.
 
+use qt_therapy_msgs::live_line::proposal_status_name;
 use qt_therapy_msgs::{
     ActionProposal, Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, Tally,
 };
@@ -304,19 +305,6 @@ impl DecisionView {
             action_names: Action::ALL.map(Action::key),
             feedback_name: feedback_name(d.feedback),
         }
-    }
-}
-
-/// The status of an `ActionProposal` by name (`proposed`, `accepted`, `replaced`,
-/// `timed_out`, `withdrawn`), which the page translates; `unknown` otherwise.
-pub fn proposal_status_name(status: u8) -> &'static str {
-    match status {
-        ActionProposal::PROPOSED => "proposed",
-        ActionProposal::ACCEPTED => "accepted",
-        ActionProposal::REPLACED => "replaced",
-        ActionProposal::TIMED_OUT => "timed_out",
-        ActionProposal::WITHDRAWN => "withdrawn",
-        _ => "unknown",
     }
 }
 

@@ -99,6 +99,28 @@ fn command(kind: u8, session: &str) -> TherapistCommand {
     }
 }
 
+impl Command {
+    /// The one command a session command line sends (None for start and run-session).
+    fn session_command(&self) -> Option<TherapistCommand> {
+        let (code, s) = match self {
+            Command::Start(_) | Command::RunSession { .. } => return None,
+            Command::Pause(s) => (TherapistCommand::PAUSE, s),
+            Command::Resume(s) => (TherapistCommand::RESUME, s),
+            Command::Stop(s) => (TherapistCommand::STOP, s),
+            Command::EmergencyStop(s) => (TherapistCommand::EMERGENCY_STOP, s),
+            Command::Encourage(s) => (TherapistCommand::OVERRIDE_ENCOURAGING, s),
+            Command::Challenge(s) => (TherapistCommand::OVERRIDE_CHALLENGING, s),
+            Command::Accept(s) => (TherapistCommand::ACCEPT_PROPOSAL, s),
+            Command::Override { session, level } => {
+                let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &session.session);
+                c.level = *level;
+                return Some(c);
+            }
+        };
+        Some(command(code, &s.session))
+    }
+}
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
@@ -161,73 +183,11 @@ async fn main() -> anyhow::Result<()> {
                 }
                 code
             }
-            Command::Pause(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::PAUSE, &s.session),
-                )
-                .await?
-            }
-            Command::Resume(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::RESUME, &s.session),
-                )
-                .await?
-            }
-            Command::Stop(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::STOP, &s.session),
-                )
-                .await?
-            }
-            Command::EmergencyStop(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::EMERGENCY_STOP, &s.session),
-                )
-                .await?
-            }
-            Command::Override { session, level } => {
-                let mut c = command(TherapistCommand::OVERRIDE_LEVEL, &session.session);
-                c.level = level;
+            single => {
+                let c = single
+                    .session_command()
+                    .context("start and run-session are handled above")?;
                 send(&commands, &shell, &mut states, c).await?
-            }
-            Command::Encourage(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::OVERRIDE_ENCOURAGING, &s.session),
-                )
-                .await?
-            }
-            Command::Challenge(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::OVERRIDE_CHALLENGING, &s.session),
-                )
-                .await?
-            }
-            Command::Accept(s) => {
-                send(
-                    &commands,
-                    &shell,
-                    &mut states,
-                    command(TherapistCommand::ACCEPT_PROPOSAL, &s.session),
-                )
-                .await?
             }
         };
         Ok(code)

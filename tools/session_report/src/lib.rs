@@ -556,6 +556,8 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
          <th>how chosen</th><th>therapist asked</th><th>T</th><th>Q(L1)</th><th>Q(L2)</th><th>Q(L3)</th><th>Q(enc)</th>\
          <th>Q(chal)</th><th>sequence</th><th>answer</th><th>result</th><th>time s</th><th>E</th></tr>",
     );
+    // Each sequence's proposal, gathered once for the table and the list below it.
+    let proposals = log.proposals();
     for r in &log.results {
         let d = log
             .decisions
@@ -587,8 +589,9 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
                 "",
             ),
         };
-        let asked = log
-            .proposal_for(&r.session_id, r.sequence_index)
+        let asked = proposals
+            .iter()
+            .find(|p| p.session_id() == r.session_id && p.step() == r.sequence_index)
             .map(|p| {
                 format!(
                     "{}<br><small>{}</small>",
@@ -623,9 +626,8 @@ pub fn report_html(log: &SessionLog) -> Result<String, ReportError> {
     }
     html.push_str("</table>");
     // Proposals of sequences that never played (withdrawn when the session ended).
-    let unplayed: Vec<Proposal<'_>> = log
-        .proposals()
-        .into_iter()
+    let unplayed: Vec<&Proposal<'_>> = proposals
+        .iter()
         .filter(|p| {
             !log.results
                 .iter()

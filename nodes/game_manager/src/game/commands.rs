@@ -202,7 +202,7 @@ impl GameManager {
                 }
                 Ok(())
             }
-            TherapistCommand::ACCEPT_PROPOSAL if self.open_proposal().is_none() => {
+            TherapistCommand::ACCEPT_PROPOSAL if self.current.proposal.is_none() => {
                 refuse("no proposal is open (one that ran out was played)")
             }
             _ => Ok(()),

@@ -12,7 +12,7 @@ use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::live_line::{level_and_feedback, proposal_answer, proposal_asked};
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, BehaviourState};
-use sequence_game::{Action, Feedback, Level, ModelInput, UserModelTable};
+use sequence_game::{Feedback, Level, ModelInput, UserModelTable};
 
 /// A proposal waiting for the therapist.
 #[derive(Debug, Clone, PartialEq)]
@@ -259,10 +259,5 @@ impl GameManager {
             response_time: ((now - open.proposed_ns) as f64 * 1e-9) as f32,
             ..open.message
         }));
-    }
-
-    /// The open proposal's action, for an ACCEPT_PROPOSAL's check.
-    pub(super) fn open_proposal(&self) -> Option<Action> {
-        self.current.proposal.as_ref().map(|p| p.plan.action)
     }
 }
