@@ -2,7 +2,13 @@
 //! the real engagement classifier and come out as per-frame estimates, in order and none lost,
 //! stamped with OpenFace's spacing; a row written in two halves is one frame; a bad row is
 //! named and skipped; the file truncated by a new OpenFace run is read again, on a new clock.
-//! The classifier's seconds also come out the ROS4HRI way, the face a tracked person. Every
+//! The classifier's seconds also come out the ROS4HRI way, the face a tracked person.
+//!
+//! Against a stand-in with OpenFace's own habits (`tests/bin/openface_peer.rs`: buffered rows,
+//! the end-of-run rewrite in place), counting what a reader receives: a bridge killed and
+//! respawned in the middle of a run stamps no frame ahead of the clock and keeps OpenFace's
+//! clock; the rewrite publishes nothing twice; a video processed at full speed, a finished
+//! recording replayed from the file and from a pipe reach a best-effort reader whole. Every
 //! process runs in one private loopback-only network namespace.
 
 use std::fmt::Write as _;
@@ -90,10 +96,10 @@ fn appended_rows_reach_the_classifier_in_order_through_a_restart() {
     for k in 0..12 {
         if k == 4 {
             appends.push_str(
-                "cat run1_04a >> webcam.csv; sleep 0.3; cat run1_04b >> webcam.csv; sleep 0.15\n",
+                "cat run1_04a >> webcam.csv; sleep 0.3; cat run1_04b >> webcam.csv; sleep 0.167\n",
             );
         } else {
-            let _ = writeln!(appends, "cat run1_{k:02} >> webcam.csv; sleep 0.15");
+            let _ = writeln!(appends, "cat run1_{k:02} >> webcam.csv; sleep 0.167");
         }
         if k == 7 {
             appends.push_str("cat garbage >> webcam.csv\n");
@@ -101,13 +107,13 @@ fn appended_rows_reach_the_classifier_in_order_through_a_restart() {
     }
     appends.push_str("sleep 1; : > webcam.csv; cat header >> webcam.csv\n");
     for k in 0..6 {
-        let _ = writeln!(appends, "cat run2_{k:02} >> webcam.csv; sleep 0.15");
+        let _ = writeln!(appends, "cat run2_{k:02} >> webcam.csv; sleep 0.167");
     }
     let script = format!(
         r#"
         export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR=params RUST_BACKTRACE=0
         cd {d}
-        {probe} --params-file {root}/tests/params/dds_probe.yaml estimates --person face_cam_front_0 > est.out 2> est.err &
+        {probe} --params-file {root}/tests/params/dds_probe.yaml estimates > est.out 2> est.err &
         P=$!
         {classifier} run --params-file {root}/params/engagement_classifier.yaml \
           --param model_file:={root}/nodes/engagement_classifier/models/synthetic_engagement.json > cls.out 2> cls.err &
@@ -160,14 +166,19 @@ fn appended_rows_reach_the_classifier_in_order_through_a_restart() {
         .iter()
         .map(|e| e["stamp_ns"].as_i64().expect("stamp"))
         .collect();
-    // In order, with OpenFace's own spacing within each run (its timestamps have 1 ms steps).
+    // In order, with OpenFace's own spacing within each run (its timestamps have 1 ms steps),
+    // but where the smallest lag from OpenFace's clock to the bridge's read fell (the file
+    // is polled every 20 ms; row 23 came 0.3 s late): within 25 ms of it.
     let spacing = |from: usize, to: usize| {
         for k in from + 1..to {
             let gap = stamps[k] - stamps[k - 1];
             let t0 = if from == 0 { 0.033 } else { 0.041 };
             let ms = |j: usize| ((t0 + j as f64 / 30.0) * 1000.0).round();
-            let want = (ms(k - from) - ms(k - 1 - from)) * 1e6;
-            assert_eq!(gap, want as i64, "frame {k}: {context}");
+            let want = ((ms(k - from) - ms(k - 1 - from)) * 1e6) as i64;
+            assert!(
+                (gap - want).abs() <= 25_000_000,
+                "frame {k}: {gap} ns, want {want}: {context}"
+            );
         }
     };
     spacing(0, first.len());
@@ -175,13 +186,15 @@ fn appended_rows_reach_the_classifier_in_order_through_a_restart() {
     // The second run is on a clock of its own: anchored when its first row was read, after
     // the first run's last frame.
     assert!(stamps[first.len()] > stamps[first.len() - 1], "{context}");
-    // The same seconds the ROS4HRI way: the camera's face is a tracked person (no session
-    // runs), with a level per second.
+    // The same seconds the ROS4HRI way: the camera's face is a tracked (anonymous) person,
+    // with a level per second. All REP-155 asks of a person: the classifier's ros4hri_dds test.
     let events = json_lines(&read("est.out"));
     assert!(
-        events
-            .iter()
-            .any(|e| e["event"] == "tracked" && e["ids"] == serde_json::json!(["face_cam_front_0"])),
+        events.iter().any(|e| e["event"] == "tracked"
+            && e["ids"].as_array().is_some_and(|ids| ids.len() == 1
+                && ids[0]
+                    .as_str()
+                    .is_some_and(|id| id.starts_with("anonymous_person_")))),
         "{context}"
     );
     let levels: Vec<i64> = events
@@ -207,6 +220,265 @@ fn appended_rows_reach_the_classifier_in_order_through_a_restart() {
     assert!(
         bridge_log
             .contains("91 rows: 90 published, 0 without a face, 0 below min_confidence, 1 bad"),
+        "{context}"
+    );
+}
+
+/// What the stand-in OpenFace and the reader printed, by frame.
+struct Frames {
+    /// Frame -> (OpenFace timestamp s, wall ns produced, has a face).
+    written: std::collections::BTreeMap<u64, (f64, i64, bool)>,
+    /// (frame_id, frame, stamp ns, received ns), in arrival order.
+    received: Vec<(String, u64, i64, i64)>,
+}
+
+impl Frames {
+    fn read(writer: &str, reader: &str) -> Frames {
+        let written = json_lines(writer)
+            .iter()
+            .filter(|e| e["event"] == "frame")
+            .map(|e| {
+                (
+                    e["frame"].as_u64().expect("frame"),
+                    (
+                        e["timestamp"].as_f64().expect("timestamp"),
+                        e["wall_ns"].as_i64().expect("wall"),
+                        e["face"].as_bool().expect("face"),
+                    ),
+                )
+            })
+            .collect();
+        let received = json_lines(reader)
+            .iter()
+            .filter(|e| e["event"] == "frame")
+            .map(|e| {
+                (
+                    e["frame_id"].as_str().unwrap_or_default().to_string(),
+                    e["frame"].as_f64().expect("frame") as u64,
+                    e["stamp_ns"].as_i64().expect("stamp"),
+                    e["recv_ns"].as_i64().expect("received"),
+                )
+            })
+            .collect();
+        Frames { written, received }
+    }
+
+    fn of(&self, frame_id: &str) -> Vec<(u64, i64, i64)> {
+        self.received
+            .iter()
+            .filter(|r| r.0 == frame_id)
+            .map(|r| (r.1, r.2, r.3))
+            .collect()
+    }
+}
+
+/// Runs `script` (processes and waits) in one loopback namespace from the temp dir `d`, with
+/// the reader started first; returns the outputs or `None` where namespaces cannot be made.
+fn run_with_reader(d: &std::path::Path, script: &str) -> Option<(String, String)> {
+    let full = format!(
+        r#"
+        export ROS_LOCALHOST_ONLY=1 QT_PARAMS_DIR=params RUST_BACKTRACE=0
+        cd {d}
+        {peer} read --params-file {root}/tests/params/openface_peer.yaml > reader.out 2> reader.err &
+        R=$!
+        # Discovery first: the frames are best effort.
+        sleep 3
+        {script}
+        sleep 0.5
+        kill -INT $R; wait $R
+        "#,
+        d = d.display(),
+        root = suite_tests::workspace_root().display(),
+        peer = env!("CARGO_BIN_EXE_openface_peer"),
+    );
+    let out = run_in_loopback_netns(&full, Duration::from_secs(120))?;
+    let mut context = format!(
+        "script:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut logs: Vec<_> = std::fs::read_dir(d)
+        .expect("temp dir")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "err"))
+        .collect();
+    logs.sort();
+    for p in logs {
+        let _ = write!(
+            context,
+            "\n{}:\n{}",
+            p.display(),
+            std::fs::read_to_string(&p).unwrap_or_default()
+        );
+    }
+    Some((String::from_utf8_lossy(&out.stdout).into_owned(), context))
+}
+
+#[test]
+fn a_bridge_respawned_mid_run_stamps_nothing_ahead_and_openfaces_rewrite_goes_out_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    // A 6 s webcam run (the child seated after 1 s), ended by OpenFace's rewrite; the bridge
+    // killed 3 s into it and respawned at once, as the tablet launch file's `respawn` does.
+    let script = format!(
+        r#"
+        bridge() {{ exec {bridge} --params-file {root}/params/openface_bridge.yaml --csv webcam.csv \
+          --param frame_id:=cam_front "$@"; }}
+        bridge > bridge1.err 2>&1 &
+        B=$!
+        sleep 1
+        {peer} write --out webcam.csv --frames 180 --fps 30 --lost-first 30 > writer.out &
+        W=$!
+        sleep 3
+        kill -KILL $B; wait $B
+        echo "killed_ns=$(date +%s%N)"
+        bridge > bridge2.err 2>&1 &
+        B=$!
+        wait $W
+        sleep 1.5
+        kill -INT $B; wait $B; echo "bridge_exit=$?"
+        "#,
+        root = suite_tests::workspace_root().display(),
+        bridge = workspace_bin("openface_bridge").display(),
+        peer = env!("CARGO_BIN_EXE_openface_peer"),
+    );
+    let Some((stdout, context)) = run_with_reader(d, &script) else {
+        return;
+    };
+    let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
+    assert!(stdout.contains("bridge_exit=0"), "{context}");
+    let killed_ns: i64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("killed_ns="))
+        .and_then(|v| v.trim().parse().ok())
+        .expect("the kill time");
+    let frames = Frames::read(&read("writer.out"), &read("reader.out"));
+    let got = frames.of("cam_front");
+    assert!(!got.is_empty(), "{context}");
+    // No stamp ahead of the clock.
+    for (frame, stamp, recv) in &got {
+        assert!(
+            stamp <= recv,
+            "frame {frame} stamped {} ms ahead: {context}",
+            (stamp - recv) / 1_000_000
+        );
+    }
+    // Every stamp on OpenFace's clock: stamp minus OpenFace's timestamp is the same (the
+    // smallest lag from OpenFace's clock to a read) for both bridges, within what the
+    // stand-in's buffering and the polling spread it.
+    let offsets: Vec<i64> = got
+        .iter()
+        .map(|(f, stamp, _)| stamp - (frames.written[f].0 * 1e9).round() as i64)
+        .collect();
+    let spread = offsets.iter().max().expect("one") - offsets.iter().min().expect("one");
+    assert!(
+        spread <= 250_000_000,
+        "offsets spread {} ms: {context}",
+        spread / 1_000_000
+    );
+    // And never before the stand-in produced the frame.
+    for (f, stamp, _) in &got {
+        assert!(
+            *stamp >= frames.written[f].1 - 5_000_000,
+            "frame {f} stamped before it was made: {context}"
+        );
+    }
+    // Nothing lost: every frame with a face came.
+    let mut count = std::collections::BTreeMap::<u64, usize>::new();
+    for (f, _, _) in &got {
+        *count.entry(*f).or_default() += 1;
+    }
+    let faces: Vec<u64> = frames
+        .written
+        .iter()
+        .filter(|(_, w)| w.2)
+        .map(|(f, _)| *f)
+        .collect();
+    let missing: Vec<u64> = faces
+        .iter()
+        .filter(|f| !count.contains_key(f))
+        .copied()
+        .collect();
+    assert!(missing.is_empty(), "frames lost: {missing:?} {context}");
+    assert!(
+        count.keys().all(|f| frames.written[f].2),
+        "a frame without a face was published"
+    );
+    // Published twice only where the respawned bridge's backlog (max_backlog_s, 1 s) met what
+    // its predecessor had sent before it died; the rewrite repeated nothing.
+    for (f, n) in &count {
+        if *n > 1 {
+            let made = frames.written[f].1;
+            assert!(
+                *n == 2 && made > killed_ns - 1_500_000_000 && made <= killed_ns,
+                "frame {f} received {n} times (made {} ms before the kill): {context}",
+                (killed_ns - made) / 1_000_000
+            );
+        }
+    }
+    let log = read("bridge2.err");
+    assert!(log.contains("OpenFace rewrote its run"), "{context}");
+    assert!(log.contains("the OpenFace CSV was "), "{context}");
+}
+
+#[test]
+fn a_video_at_full_speed_and_a_replayed_recording_reach_a_reader_whole() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    // 453 frames: OpenFace processing a recorded video as fast as it goes while the bridge
+    // follows; then the finished CSV (rewritten by OpenFace) replayed at 8 times its clock,
+    // from the file and from a pipe.
+    let script = format!(
+        r#"
+        bridge() {{ exec {bridge} --params-file {root}/params/openface_bridge.yaml "$@"; }}
+        bridge --csv video.csv --param frame_id:=video_live > live.err 2>&1 &
+        B=$!
+        sleep 0.5
+        {peer} write --out video.csv --frames 453 --fps 0 > writer.out
+        sleep 2.5
+        kill -INT $B; wait $B; echo "live_exit=$?"
+        ( bridge --csv video.csv --rate 8 --param frame_id:=video_file > file.err 2>&1 ); echo "file_exit=$?"
+        ( bridge --csv - --rate 8 --param frame_id:=video_pipe < video.csv > pipe.err 2>&1 ); echo "pipe_exit=$?"
+        "#,
+        root = suite_tests::workspace_root().display(),
+        bridge = workspace_bin("openface_bridge").display(),
+        peer = env!("CARGO_BIN_EXE_openface_peer"),
+    );
+    let Some((stdout, context)) = run_with_reader(d, &script) else {
+        return;
+    };
+    let read = |f: &str| std::fs::read_to_string(d.join(f)).unwrap_or_default();
+    for exit in ["live_exit=0", "file_exit=0", "pipe_exit=0"] {
+        assert!(stdout.contains(exit), "{exit}: {context}");
+    }
+    let frames = Frames::read(&read("writer.out"), &read("reader.out"));
+    let all: Vec<u64> = (1..=453).collect();
+    for frame_id in ["video_live", "video_file", "video_pipe"] {
+        let got = frames.of(frame_id);
+        let numbers: Vec<u64> = got.iter().map(|g| g.0).collect();
+        assert_eq!(
+            numbers, all,
+            "{frame_id}: every frame once, in order: {context}"
+        );
+        assert!(
+            got.iter().all(|(_, stamp, recv)| stamp <= recv),
+            "{frame_id}: {context}"
+        );
+    }
+    // The replays on OpenFace's clock at 8 times: 1/240 s apart.
+    for frame_id in ["video_file", "video_pipe"] {
+        let got = frames.of(frame_id);
+        for w in got.windows(2) {
+            let gap = w[1].1 - w[0].1;
+            assert!(
+                (gap - 4_166_667).abs() < 1_000_000,
+                "{frame_id}: gap {gap} ns: {context}"
+            );
+        }
+    }
+    assert!(
+        read("live.err").contains("OpenFace rewrote its run"),
         "{context}"
     );
 }

@@ -2,7 +2,7 @@
 //! `FeatureExtraction` writes one CSV row per face and frame; the bridge follows that file as it
 //! grows (or reads standard input) and publishes each row as an `OpenFaceFeatures` message for
 //! the engagement classifier. The core (`bridge`) is sans-IO: CSV lines and the clock in,
-//! messages and log lines out; `follow` tails the file; `src/main.rs` is the DDS shell.
+//! messages (with the time each is due) and log lines out; `follow` tails the file; `src/main.rs` is the DDS shell.
 
 pub mod bridge;
 pub mod columns;
@@ -11,7 +11,7 @@ pub mod params;
 #[cfg(test)]
 pub(crate) mod test_csv;
 
-pub use bridge::{BadRow, Bridge, Counts, Output};
+pub use bridge::{BadRow, Bridge, Counts, LogLine};
 pub use columns::{ColumnMap, HeaderError};
 pub use follow::{FollowEvent, Follower};
 pub use params::{OpenFaceBridgeParams, ParamError, StampSource};

@@ -7,8 +7,7 @@ use anyhow::{Context, bail};
 use clap::Parser;
 use node_shell::logging::log_at;
 use node_shell::{NodeShell, ShellOptions, now_nanos};
-use openface_bridge::{Bridge, FollowEvent, Follower, OpenFaceBridgeParams, Output};
-use qt_therapy_msgs::OpenFaceFeatures;
+use openface_bridge::{Bridge, FollowEvent, Follower, LogLine, OpenFaceBridgeParams};
 use qt_therapy_msgs::topics::OPENFACE_FEATURES;
 use std::io::{BufRead, Read as _};
 use std::path::PathBuf;
@@ -23,6 +22,10 @@ struct Cli {
     /// The CSV to follow, or - for standard input (overrides csv_path of the parameter file).
     #[arg(long)]
     csv: Option<String>,
+    /// The CSV is a finished recording: publish it on OpenFace's own clock at this multiple
+    /// of it (1: real time) and end at its end (overrides replay_rate).
+    #[arg(long, value_name = "RATE")]
+    rate: Option<f64>,
     #[command(flatten)]
     shell: ShellOptions,
 }
@@ -35,11 +38,14 @@ async fn main() -> anyhow::Result<()> {
     if let Some(csv) = &cli.csv {
         params.csv_path = csv.clone();
     }
+    if let Some(rate) = cli.rate {
+        params.replay_rate = rate;
+    }
     let params_file = cli.shell.params_path(shell.name());
     let outcome = match params.validate() {
         Ok(stamp) => run(&mut shell, &params, Bridge::new(&params, stamp)).await,
         Err(e) => Err(anyhow::Error::new(e).context(format!(
-            "parameter file {} (or --csv)",
+            "parameter file {} (or --csv, --rate)",
             params_file.display()
         ))),
     };
@@ -49,11 +55,19 @@ async fn main() -> anyhow::Result<()> {
 
 /// What the reading side hands to the publishing loop.
 enum Read {
-    Event(FollowEvent),
-    /// Standard input ended: the producer is gone.
+    /// What one read of the file (one poll) or of the pipe (one line) found.
+    Events(Vec<FollowEvent>),
+    /// The input ended: standard input closed, or a replayed file read to its end.
     End,
     Failed(String),
 }
+
+/// How long publication waits for a first reader to match.
+const READER_WAIT: Duration = Duration::from_secs(3);
+
+/// Messages queued for their time past which the reading waits (bounded memory on a long
+/// recording replayed slowly).
+const MAX_QUEUED: usize = 4096;
 
 async fn run(
     shell: &mut NodeShell,
@@ -61,87 +75,154 @@ async fn run(
     mut bridge: Bridge,
 ) -> anyhow::Result<()> {
     let frames = shell.publisher(OPENFACE_FEATURES)?;
-    let (tx, mut rx) = mpsc::channel::<Read>(1024);
+    let (tx, mut rx) = mpsc::channel::<Read>(8);
+    let replay = params.replay_rate > 0.0;
     let source = if params.csv_path == "-" {
         spawn_stdin(tx, params.max_line_bytes);
         "standard input".to_string()
     } else {
         let path = PathBuf::from(&params.csv_path);
-        spawn_follower(tx, &path, params)?;
+        spawn_follower(tx, &path, params, replay)?;
         path.display().to_string()
     };
-    tracing::info!(source = %source, frame_id = %params.frame_id, stamp = %params.stamp, "following OpenFace's CSV");
+    if replay {
+        tracing::info!(source = %source, frame_id = %params.frame_id, rate = params.replay_rate, "replaying a finished OpenFace CSV on its own clock");
+    } else {
+        tracing::info!(source = %source, frame_id = %params.frame_id, stamp = %params.stamp, "following OpenFace's CSV");
+    }
+    let shell: &NodeShell = shell;
     let stop = shell.shutdown_signal();
     tokio::pin!(stop);
+    // Frames are best effort: those sent before the classifier has matched this writer (a
+    // respawned bridge's backlog) would be lost. Reading goes on meanwhile; publication
+    // waits for a reader, or READER_WAIT.
+    let reader = frames.wait_for_subscribers(shell, READER_WAIT);
+    tokio::pin!(reader);
+    let mut reader_ready = false;
     let report_every = Duration::from_secs_f64(params.report_interval_s);
     let mut report = tokio::time::interval(report_every.max(Duration::from_millis(10)));
     report.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut last_reported = bridge.counts().clone();
-    let publish = |m: OpenFaceFeatures| {
-        if !frames.send(m) {
-            tracing::warn!("publishing a frame on {} failed", OPENFACE_FEATURES.name);
-        }
-    };
+    let mut input_open = true;
+    let mut not_sent = 0u64;
     loop {
-        let read = tokio::select! {
-            _ = &mut stop => break,
+        if !input_open && bridge.queued() == 0 {
+            break;
+        }
+        let wait_due = bridge
+            .next_due_ns()
+            .filter(|_| reader_ready)
+            .map(|due| Duration::from_nanos((due - now_nanos()).max(0) as u64));
+        tokio::select! {
+            _ = &mut stop => {
+                if bridge.queued() > 0 {
+                    tracing::info!("stopped with {} frames not yet due: not published", bridge.queued());
+                }
+                break;
+            }
             _ = report.tick(), if !report_every.is_zero() => {
                 if *bridge.counts() != last_reported {
                     tracing::info!("{}", bridge.report());
                     last_reported = bridge.counts().clone();
                 }
-                continue;
             }
-            read = rx.recv() => read,
-        };
-        let outputs = match read {
-            Some(Read::Event(FollowEvent::Line { text, line_no })) => bridge
-                .line(&text, line_no, now_nanos())
-                .with_context(|| format!("{source}, line {line_no}"))?,
-            Some(Read::Event(FollowEvent::TooLong { line_no })) => bridge.too_long(line_no),
-            Some(Read::Event(FollowEvent::Restarted { why })) => bridge.restarted(why),
-            Some(Read::Failed(e)) => bail!("reading {source}: {e}"),
-            Some(Read::End) | None => {
-                tracing::info!("{source} ended");
-                break;
+            matched = &mut reader, if !reader_ready => {
+                if !matched {
+                    tracing::info!("no reader of {} after {READER_WAIT:?}: publishing anyway", OPENFACE_FEATURES.name);
+                }
+                reader_ready = true;
             }
-        };
-        for o in outputs {
-            match o {
-                Output::Publish(m) => publish(m),
-                Output::Log(level, line) => log_at(level, &line),
+            _ = tokio::time::sleep(wait_due.unwrap_or_default()), if wait_due.is_some() => {}
+            read = rx.recv(), if input_open && bridge.queued() < MAX_QUEUED => {
+                let mut read = read;
+                // Everything read by now is one read: stamped together.
+                loop {
+                    match read {
+                        Some(Read::Events(events)) => {
+                            for event in events {
+                                let logs = match event {
+                                    FollowEvent::Line { text, line_no } => bridge
+                                        .line(&text, line_no, now_nanos())
+                                        .with_context(|| format!("{source}, line {line_no}"))?,
+                                    FollowEvent::TooLong { line_no } => bridge.too_long(line_no),
+                                    FollowEvent::Restarted { why } => bridge.restarted(why),
+                                    FollowEvent::CaughtUp => bridge.caught_up(),
+                                };
+                                for LogLine(level, line) in logs {
+                                    log_at(level, &line);
+                                }
+                            }
+                        }
+                        Some(Read::Failed(e)) => bail!("reading {source}: {e}"),
+                        Some(Read::End) | None => {
+                            tracing::info!("{source} ended");
+                            input_open = false;
+                            break;
+                        }
+                    }
+                    match rx.try_recv() {
+                        Ok(more) => read = Some(more),
+                        Err(_) => break,
+                    }
+                }
+                for LogLine(level, line) in bridge.end_of_read(now_nanos()) {
+                    log_at(level, &line);
+                }
             }
         }
+        if reader_ready {
+            for m in bridge.due(now_nanos()) {
+                if !frames.send(m) {
+                    not_sent += 1;
+                }
+            }
+        }
+    }
+    if not_sent > 0 {
+        tracing::warn!(
+            "{not_sent} frames could not be published on {}",
+            OPENFACE_FEATURES.name
+        );
     }
     tracing::info!("{}", bridge.report());
     Ok(())
 }
 
-/// Polls the file on a thread of its own (file reads block) and sends what it finds.
+/// Polls the file on a thread of its own (file reads block) and sends what each poll finds.
+/// In a replay the file is finished: read to its end, then `End`.
 fn spawn_follower(
     tx: mpsc::Sender<Read>,
     path: &std::path::Path,
     params: &OpenFaceBridgeParams,
+    replay: bool,
 ) -> anyhow::Result<()> {
-    let mut follower = Follower::new(path, params.max_line_bytes, params.start_at_end);
+    let mut follower = Follower::new(path, params.max_line_bytes);
     let every = Duration::from_secs_f64(params.poll_interval_s);
     std::thread::Builder::new()
         .name("csv-follower".into())
         .spawn(move || {
             let mut waiting_told = false;
             loop {
-                match follower.poll() {
-                    Ok(events) => {
-                        for e in events {
-                            if tx.blocking_send(Read::Event(e)).is_err() {
-                                return;
-                            }
-                        }
-                    }
+                let events = match follower.poll() {
+                    Ok(events) => events,
                     Err(e) => {
                         let _ = tx.blocking_send(Read::Failed(e.to_string()));
                         return;
                     }
+                };
+                if replay && !follower.is_open() {
+                    let _ = tx.blocking_send(Read::Failed("no such file".into()));
+                    return;
+                }
+                let at_end = replay && events.iter().all(|e| matches!(e, FollowEvent::CaughtUp));
+                if at_end {
+                    let last = follower.finish().into_iter().collect();
+                    let _ = tx.blocking_send(Read::Events(last));
+                    let _ = tx.blocking_send(Read::End);
+                    return;
+                }
+                if !events.is_empty() && tx.blocking_send(Read::Events(events)).is_err() {
+                    return;
                 }
                 if !follower.is_open() && !waiting_told {
                     tracing::info!(path = %follower.path().display(), "waiting for OpenFace to create the CSV");
@@ -150,7 +231,9 @@ fn spawn_follower(
                 if tx.is_closed() {
                     return;
                 }
-                std::thread::sleep(every);
+                if !replay {
+                    std::thread::sleep(every);
+                }
             }
         })
         .context("starting the CSV follower")?;
@@ -205,7 +288,7 @@ fn spawn_stdin(tx: mpsc::Sender<Read>, max_line_bytes: usize) {
                     return;
                 }
             };
-            if tx.blocking_send(Read::Event(event)).is_err() {
+            if tx.blocking_send(Read::Events(vec![event])).is_err() {
                 return;
             }
         }

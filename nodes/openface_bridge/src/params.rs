@@ -5,8 +5,9 @@ use serde::Deserialize;
 /// Where a frame's stamp comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StampSource {
-    /// OpenFace's own `timestamp` (seconds since its capture started), anchored to the wall
-    /// clock at the first row of a run: frames keep their spacing whatever the file's delays.
+    /// OpenFace's own `timestamp` (seconds since its capture started) on the wall clock (the
+    /// run's smallest lag from OpenFace's clock to the read): frames keep their spacing
+    /// whatever the file's delays, and no stamp is ahead of the clock.
     OpenFace,
     /// The wall clock when the bridge read the row.
     Receipt,
@@ -26,8 +27,15 @@ pub struct OpenFaceBridgeParams {
     pub min_confidence: f64,
     /// How often the file is checked for new rows, in seconds.
     pub poll_interval_s: f64,
-    /// Follow only what is appended after the start, not the rows already in the file.
-    pub start_at_end: bool,
+    /// Of the rows a file already holds when the bridge finds it (a run going on: the bridge
+    /// was restarted), only those within this many seconds of the newest are published.
+    pub max_backlog_s: f64,
+    /// 0: follow OpenFace live. Above 0: the CSV (or standard input) is a finished recording,
+    /// published on OpenFace's own clock at this multiple of it; the bridge ends at its end.
+    pub replay_rate: f64,
+    /// The most messages a second the bridge publishes; a burst (a backlog, a stall, a
+    /// fast replay) is spread out so a best-effort reader's queue (keep last 10) keeps up.
+    pub max_publish_hz: f64,
     /// Longest line accepted, in bytes; a longer one is a bad row.
     pub max_line_bytes: usize,
     /// How often the counts are logged while rows flow, in seconds (0: never).
@@ -42,7 +50,9 @@ impl Default for OpenFaceBridgeParams {
             stamp: "openface".into(),
             min_confidence: 0.0,
             poll_interval_s: 0.02,
-            start_at_end: false,
+            max_backlog_s: 1.0,
+            replay_rate: 0.0,
+            max_publish_hz: 300.0,
             max_line_bytes: 65_536,
             report_interval_s: 60.0,
         }
@@ -80,6 +90,27 @@ impl OpenFaceBridgeParams {
             return bad(
                 "poll_interval_s",
                 format!("{} is not in [0.001, 10] s", self.poll_interval_s),
+            );
+        }
+        if !(self.max_backlog_s.is_finite() && self.max_backlog_s >= 0.0) {
+            return bad(
+                "max_backlog_s",
+                format!("{} is not a number of seconds", self.max_backlog_s),
+            );
+        }
+        if !(self.replay_rate.is_finite() && (0.0..=1000.0).contains(&self.replay_rate)) {
+            return bad(
+                "replay_rate",
+                format!(
+                    "{} is not in [0, 1000] (0: follow live; 1: a recording in real time)",
+                    self.replay_rate
+                ),
+            );
+        }
+        if !(self.max_publish_hz.is_finite() && (1.0..=100_000.0).contains(&self.max_publish_hz)) {
+            return bad(
+                "max_publish_hz",
+                format!("{} is not in [1, 100000] messages/s", self.max_publish_hz),
             );
         }
         if !(1024..=16 << 20).contains(&self.max_line_bytes) {
@@ -152,6 +183,27 @@ mod tests {
                 "frame_id",
                 OpenFaceBridgeParams {
                     frame_id: String::new(),
+                    ..good.clone()
+                },
+            ),
+            (
+                "replay_rate",
+                OpenFaceBridgeParams {
+                    replay_rate: -1.0,
+                    ..good.clone()
+                },
+            ),
+            (
+                "max_publish_hz",
+                OpenFaceBridgeParams {
+                    max_publish_hz: 0.0,
+                    ..good.clone()
+                },
+            ),
+            (
+                "max_backlog_s",
+                OpenFaceBridgeParams {
+                    max_backlog_s: f64::NAN,
                     ..good.clone()
                 },
             ),
