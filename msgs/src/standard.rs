@@ -1,5 +1,6 @@
 //! Mirrors of the standard ROS 2 types our messages use (`builtin_interfaces/Time`,
-//! `std_msgs/Header`, `std_msgs/String`), with the DDS type names a ROS 2 peer expects.
+//! `std_msgs/Header`, `std_msgs/String`, `std_msgs/Bool`), with the DDS type names a ROS 2
+//! peer expects.
 
 use crate::definition::ros_message;
 
@@ -63,6 +64,13 @@ pub mod std_msgs {
         /// `std_msgs/String`, as QTrobot's speech, emotion and gesture topics take it.
         pub struct StringMsg("std_msgs", "String", "string data\n") {
             pub data: String,
+        }
+    }
+
+    ros_message! {
+        /// `std_msgs/Bool`, as ROS4HRI's latched `/humans/persons/<id>/anonymous` takes it.
+        pub struct BoolMsg("std_msgs", "Bool", "bool data\n") {
+            pub data: bool,
         }
     }
 }

@@ -5,7 +5,7 @@ use crate::definition::MessageDefinition;
 use crate::hri_msgs::{EngagementLevel, IdsList};
 use crate::messages::*;
 use crate::services::{AssignCluster, DecideAction, PredictUser, ServiceDefinition};
-use crate::standard::std_msgs::StringMsg;
+use crate::standard::std_msgs::{BoolMsg, StringMsg};
 use std::marker::PhantomData;
 
 /// How a topic is delivered.
@@ -135,28 +135,38 @@ pub const ROBOT_EMOTION: Topic<StringMsg> = Topic::new("/qt_robot/emotion/show",
 /// QTrobot's recorded gestures, e.g. `QT/happy`.
 pub const ROBOT_GESTURE: Topic<StringMsg> = Topic::new("/qt_robot/gesture/play", QosKind::Reliable);
 
-/// ROS4HRI (REP-155): the ids of the persons tracked, latched as ROS4HRI's person manager does.
+/// ROS4HRI (REP-155): the ids of the persons seen now. Latched as ROS4HRI's person manager
+/// publishes it (`hri_person_manager`: transient-local, reliable); libhri subscribes with the
+/// system defaults (volatile), so the classifier also sends it again every second.
 pub const PERSONS_TRACKED: Topic<IdsList> = Topic::new("/humans/persons/tracked", QosKind::State);
 
-/// ROS4HRI (REP-155): a person's engagement, `/humans/persons/<person_id>/engagement_status`.
-/// The name is made once per person and kept for the process's life (a few bytes each).
-pub fn engagement_status(person_id: &str) -> Topic<EngagementLevel> {
-    let name: &'static str =
-        Box::leak(format!("/humans/persons/{person_id}/engagement_status").into_boxed_str());
-    Topic::new(name, QosKind::Reliable)
+/// ROS4HRI (REP-155): the ids of every person known, tracked or not; libhri's `getPersons()`
+/// is built from it. Not recorded: the classifier's persons are anonymous and forgotten once
+/// lost, as the person manager forgets anonymous persons, so this holds the tracked ids.
+pub const PERSONS_KNOWN: Topic<IdsList> = Topic::new("/humans/persons/known", QosKind::State);
+
+/// `/humans/persons/<person_id>/<leaf>`. The name is made once per person and kept for the
+/// process's life (a person lasts at least `ros4hri_tracked_timeout_s`, so a few hundred
+/// bytes an encounter).
+fn person_topic_name(person_id: &str, leaf: &str) -> &'static str {
+    Box::leak(format!("/humans/persons/{person_id}/{leaf}").into_boxed_str())
 }
 
-/// A ROS4HRI person id from any id: `prefix_` and the id's letters and digits, every other
-/// character an underscore (ROS names allow nothing else, no leading digit, no `__`).
-pub fn person_id(prefix: &str, id: &str) -> String {
-    let mut out = format!("{prefix}_");
-    for c in id.chars() {
-        let c = if c.is_ascii_alphanumeric() { c } else { '_' };
-        if !(c == '_' && out.ends_with('_')) {
-            out.push(c);
-        }
-    }
-    out.trim_end_matches('_').to_string()
+/// ROS4HRI (REP-155): a person's engagement, `/humans/persons/<person_id>/engagement_status`
+/// (libhri reads it with the system defaults: volatile).
+pub fn engagement_status(person_id: &str) -> Topic<EngagementLevel> {
+    Topic::new(
+        person_topic_name(person_id, "engagement_status"),
+        QosKind::Reliable,
+    )
+}
+
+/// ROS4HRI (REP-155): whether a person is anonymous (not identified, no permanent id),
+/// `/humans/persons/<person_id>/anonymous`, the one per-person topic REP-155 requires.
+/// Latched: libhri subscribes transient-local and reliable only once the person is listed,
+/// after the value was published.
+pub fn person_anonymous(person_id: &str) -> Topic<BoolMsg> {
+    Topic::new(person_topic_name(person_id, "anonymous"), QosKind::State)
 }
 
 pub const PREDICT_USER: Service<PredictUser> = Service::new("/qt_therapy/user_model/predict");
@@ -194,12 +204,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn person_ids_are_ros_names() {
-        assert_eq!(person_id("user", "1CZ1CL1P"), "user_1CZ1CL1P");
-        assert_eq!(person_id("user", "sim-child-1"), "user_sim_child_1");
-        assert_eq!(person_id("face", "cam front/0"), "face_cam_front_0");
-        assert_eq!(person_id("user", "a__b--"), "user_a_b");
-        let t = engagement_status(&person_id("user", "x"));
-        assert_eq!(t.name, "/humans/persons/user_x/engagement_status");
+    fn person_topics_are_under_the_persons_namespace() {
+        let t = engagement_status("anonymous_person_1a2b3c4d");
+        assert_eq!(
+            t.name,
+            "/humans/persons/anonymous_person_1a2b3c4d/engagement_status"
+        );
+        let a = person_anonymous("anonymous_person_1a2b3c4d");
+        assert_eq!(
+            a.name,
+            "/humans/persons/anonymous_person_1a2b3c4d/anonymous"
+        );
+        assert_eq!(a.qos, QosKind::State);
+        assert_eq!(a.info().type_name, "std_msgs/msg/Bool");
+        assert_eq!(PERSONS_KNOWN.info().type_name, "hri_msgs/msg/IdsList");
     }
 }

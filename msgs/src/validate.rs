@@ -453,6 +453,12 @@ impl Validate for crate::std_msgs::StringMsg {
     }
 }
 
+impl Validate for crate::std_msgs::BoolMsg {
+    fn validate(&self) -> Result<(), InvalidMessage> {
+        Ok(())
+    }
+}
+
 impl Validate for PredictUserRequest {
     fn validate(&self) -> Result<(), InvalidMessage> {
         const M: &str = "PredictUser request";

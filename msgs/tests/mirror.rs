@@ -4,7 +4,7 @@
 
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::definition::{Constant, Field};
-use qt_therapy_msgs::std_msgs::{Header, StringMsg};
+use qt_therapy_msgs::std_msgs::{BoolMsg, Header, StringMsg};
 use qt_therapy_msgs::*;
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -244,6 +244,11 @@ fn standard_types_match_ros2() {
     check::<Time>("int32 sec\nuint32 nanosec");
     check::<Header>("builtin_interfaces/Time stamp\nstring frame_id");
     check::<StringMsg>("string data");
+    check::<BoolMsg>("bool data");
+    assert_eq!(
+        dds_type_name::<BoolMsg>().dds_msg_type(),
+        "std_msgs::msg::dds_::Bool_"
+    );
     assert_eq!(
         dds_type_name::<GameState>().dds_msg_type(),
         "qt_therapy_msgs::msg::dds_::GameState_"
@@ -311,7 +316,10 @@ fn every_type_round_trips_through_cdr_exactly() {
     });
     round_trip(hri_msgs::IdsList {
         header: stamp(),
-        ids: vec!["user_child_7".into(), "face_camera_0".into()],
+        ids: vec![
+            "anonymous_person_1a2b3c4d".into(),
+            "anonymous_person_0e9f8a7b".into(),
+        ],
     });
     let features: Vec<f32> = (0..32).map(|i| i as f32 * 0.37 - 5.0).collect();
     round_trip(Time {
@@ -322,6 +330,7 @@ fn every_type_round_trips_through_cdr_exactly() {
     round_trip(StringMsg {
         data: "Super gemacht! Ünïcode ✓".into(),
     });
+    round_trip(BoolMsg { data: true });
     round_trip(state());
     round_trip(OpenFaceFeatures {
         header: stamp(),

@@ -47,11 +47,9 @@ enum Role {
         seconds: u64,
     },
     /// Print every EngagementEstimate received (after `ready`) until SIGINT/SIGTERM, and the
-    /// ROS4HRI persons tracked and `person`'s engagement levels.
-    Estimates {
-        #[arg(long, default_value = "face_camera_0")]
-        person: String,
-    },
+    /// ROS4HRI persons tracked and their engagement levels (each person's read from when it
+    /// is first listed, as libhri does).
+    Estimates,
 }
 
 fn emit(event: serde_json::Value) {
@@ -81,7 +79,7 @@ async fn main() -> anyhow::Result<()> {
             shell.shutdown_signal().await;
         }
         Role::RosoutReader { seconds } => rosout_reader(&mut shell, seconds).await?,
-        Role::Estimates { person } => estimates(&mut shell, &person).await?,
+        Role::Estimates => estimates(&mut shell).await?,
     }
     shell.stop().await;
     Ok(())
@@ -256,11 +254,12 @@ async fn rosout_reader(shell: &mut NodeShell, seconds: u64) -> anyhow::Result<()
     Ok(())
 }
 
-async fn estimates(shell: &mut NodeShell, person: &str) -> anyhow::Result<()> {
+async fn estimates(shell: &mut NodeShell) -> anyhow::Result<()> {
     use qt_therapy_msgs::topics::{PERSONS_TRACKED, engagement_status};
     let mut estimates = shell.subscribe(qt_therapy_msgs::topics::ENGAGEMENT_ESTIMATE, 4096)?;
     let mut tracked = shell.subscribe(PERSONS_TRACKED, 64)?;
-    let mut levels = shell.subscribe(engagement_status(person), 256)?;
+    let (level_tx, mut levels) = tokio::sync::mpsc::channel(256);
+    let mut followed = std::collections::BTreeSet::new();
     emit(serde_json::json!({"event": "ready"}));
     let stop = shell.shutdown_signal();
     tokio::pin!(stop);
@@ -271,9 +270,24 @@ async fn estimates(shell: &mut NodeShell, person: &str) -> anyhow::Result<()> {
                 "event": "estimate", "face_id": e.face_id, "frame_id": e.header.frame_id,
                 "stamp_ns": e.header.stamp.to_nanos(), "label": e.label,
             })),
-            Some(t) = tracked.recv() => emit(serde_json::json!({"event": "tracked", "ids": t.ids})),
-            Some(l) = levels.recv() => emit(serde_json::json!({
-                "event": "engagement_status", "level": l.level,
+            Some(t) = tracked.recv() => {
+                for id in &t.ids {
+                    if followed.insert(id.clone()) {
+                        let mut rx = shell.subscribe(engagement_status(id), 256)?;
+                        let (tx, id) = (level_tx.clone(), id.clone());
+                        tokio::spawn(async move {
+                            while let Some(l) = rx.recv().await {
+                                if tx.send((id.clone(), l)).await.is_err() {
+                                    break;
+                                }
+                            }
+                        });
+                    }
+                }
+                emit(serde_json::json!({"event": "tracked", "ids": t.ids}));
+            }
+            Some((person, l)) = levels.recv() => emit(serde_json::json!({
+                "event": "engagement_status", "person": person, "level": l.level,
                 "stamp_ns": l.header.stamp.to_nanos(),
             })),
         }

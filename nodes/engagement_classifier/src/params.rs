@@ -43,14 +43,16 @@ pub struct EngagementClassifierParams {
     pub decimal_repair: String,
     /// Seed of the synthetic generator.
     pub seed: i64,
-    /// Also publish the per-second engagement the ROS4HRI way (REP-155).
+    /// Also publish each camera face as a ROS4HRI person (REP-155): its `anonymous`, its
+    /// per-second `engagement_status`, and the tracked and known lists.
     pub ros4hri: bool,
     /// Smoothed expected engagement at or above this: ENGAGED.
     pub ros4hri_engaged_threshold: f64,
     /// At or below this: DISENGAGED; between the two, ENGAGING when it rose since the
     /// person's last second, DISENGAGING when it fell.
     pub ros4hri_disengaged_threshold: f64,
-    /// A person without a second for this long leaves /humans/persons/tracked, s.
+    /// A person whose face was not seen for this long ends (leaves /humans/persons/tracked
+    /// and known; its topics go); the face seen again is a new person, s.
     pub ros4hri_tracked_timeout_s: f64,
 }
 

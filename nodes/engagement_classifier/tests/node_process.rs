@@ -8,57 +8,11 @@ use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{EngagementEstimate, ExpectedEngagement, OpenFaceFeatures};
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// The node process, killed if the test ends before it does.
-struct Node(Child);
-
-impl Drop for Node {
-    fn drop(&mut self) {
-        if let Ok(None) = self.0.try_wait() {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-}
-
-impl Node {
-    /// Waits for the process to end; None if it is still running at `deadline`.
-    fn wait_for_exit(&mut self, deadline: Duration) -> Option<std::process::ExitStatus> {
-        let started = Instant::now();
-        while started.elapsed() < deadline {
-            if let Ok(Some(status)) = self.0.try_wait() {
-                return Some(status);
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        None
-    }
-}
-
-fn classifier(params_file: &Path, log_dir: &Path) -> Node {
-    let file = |name: &str| std::fs::File::create(log_dir.join(name)).expect("log file");
-    let child = Command::new(env!("CARGO_BIN_EXE_engagement_classifier"))
-        .arg("run")
-        .arg("--params-file")
-        .arg(params_file)
-        .current_dir(workspace())
-        // Should it ever join the graph, it stays on this machine; and its start-up line shows.
-        .env("ROS_LOCALHOST_ONLY", "1")
-        .env("RUST_LOG", "info")
-        .stdin(Stdio::null())
-        .stdout(file("node.out"))
-        .stderr(file("node.err"))
-        .spawn()
-        .expect("starts engagement_classifier run");
-    Node(child)
-}
+mod common;
+use common::{classifier, workspace};
 
 /// A model file that is not XGBoost JSON, and an XGBoost model with another objective: the node
 /// exits with an error naming the file and the problem, and never says it started on the graph.
@@ -87,7 +41,7 @@ fn a_bad_model_stops_the_node_before_it_joins_the_graph() {
             ),
         )
         .expect("writes");
-        let mut node = classifier(&params, dir.path());
+        let mut node = classifier(&params, dir.path(), &[]);
         let status = node
             .wait_for_exit(Duration::from_secs(30))
             .expect("the node exits at start-up");
@@ -179,7 +133,7 @@ fn bad_frames_inside_the_namespace() {
     let dir = tempfile::tempdir().expect("temp dir");
     let probe_params = dir.path().join("probe.yaml");
     std::fs::write(&probe_params, "engagement_probe:\n  ros__parameters: {}\n").expect("writes");
-    let mut node = classifier(&params_file, dir.path());
+    let mut node = classifier(&params_file, dir.path(), &[]);
 
     let t0 = node_shell::now_nanos();
     let frame = |k: usize, features: Vec<f32>| OpenFaceFeatures {
@@ -358,11 +312,7 @@ fn bad_frames_inside_the_namespace() {
         matches!(node.0.try_wait(), Ok(None)),
         "the classifier stopped"
     );
-    let interrupted = Command::new("kill")
-        .args(["-INT", &node.0.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(interrupted.success());
+    node.interrupt();
     let status = node.wait_for_exit(Duration::from_secs(20));
     let log = std::fs::read_to_string(dir.path().join("node.err")).unwrap_or_default();
     assert!(

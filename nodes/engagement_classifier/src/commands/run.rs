@@ -1,6 +1,6 @@
 //! `engagement_classifier run`: the DDS node. OpenFace frames in; per frame an
 //! `EngagementEstimate`, per second of message time and source an `ExpectedEngagement` out,
-//! and with `ros4hri` the same second as a ROS4HRI person's `EngagementLevel`. All logic is in
+//! and with `ros4hri` the same second as a ROS4HRI person's topics (REP-155). All logic is in
 //! `EngagementEstimator` and `ros4hri::PersonEngagement`; the conversion of messages is
 //! `messages::Sources`.
 
@@ -12,10 +12,11 @@ use engagement_classifier::{
 };
 use node_shell::{NodeShell, Outbox, ShellOptions};
 use qt_therapy_msgs::EngagementEstimate;
-use qt_therapy_msgs::hri_msgs::EngagementLevel;
+use qt_therapy_msgs::hri_msgs::{EngagementLevel, IdsList};
+use qt_therapy_msgs::std_msgs::BoolMsg;
 use qt_therapy_msgs::topics::{
-    ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, GAME_STATE, OPENFACE_FEATURES, PERSONS_TRACKED,
-    engagement_status,
+    ENGAGEMENT_ESTIMATE, EXPECTED_ENGAGEMENT, GAME_STATE, OPENFACE_FEATURES, PERSONS_KNOWN,
+    PERSONS_TRACKED, engagement_status, person_anonymous,
 };
 use std::collections::HashMap;
 use std::path::Path;
@@ -62,47 +63,29 @@ async fn serve(args: Args) -> anyhow::Result<()> {
         let estimates = shell.publisher(ENGAGEMENT_ESTIMATE)?;
         let seconds = shell.publisher(EXPECTED_ENGAGEMENT)?;
         let mut states = shell.subscribe(GAME_STATE, 16)?;
-        let tracked = if params.ros4hri {
-            Some(shell.publisher(PERSONS_TRACKED)?)
+        let mut hri = if params.ros4hri {
+            Some(Ros4Hri {
+                tracked: shell.publisher(PERSONS_TRACKED)?,
+                known: shell.publisher(PERSONS_KNOWN)?,
+                persons: HashMap::new(),
+            })
         } else {
             None
         };
         let mut persons = PersonEngagement::new(&params);
-        // One publisher per person seen (a few per session at most).
-        let mut person_topics: HashMap<String, Outbox<EngagementLevel>> = HashMap::new();
         let drops = shell.drops();
         let mut sources = Sources::default();
         let mut closed: Vec<EngagementSecond> = Vec::with_capacity(16);
-        let mut publish_closed = |closed: &mut Vec<EngagementSecond>,
-                                  sources: &Sources,
-                                  persons: &mut PersonEngagement,
-                                  shell: &mut NodeShell| {
+        let publish_closed = |closed: &mut Vec<EngagementSecond>,
+                              sources: &Sources,
+                              persons: &mut PersonEngagement,
+                              hri: &mut Option<Ros4Hri>,
+                              shell: &mut NodeShell| {
             for s in closed.drain(..) {
                 let second = sources.expected_engagement(&s);
                 seconds.send(second.clone());
-                let Some(tracked) = &tracked else { continue };
-                for o in persons.on_second(&second) {
-                    match o {
-                        HriOutput::Tracked(ids) => {
-                            tracked.send(ids);
-                        }
-                        HriOutput::Engagement { person, level } => {
-                            if !person_topics.contains_key(&person) {
-                                match shell.publisher(engagement_status(&person)) {
-                                    Ok(outbox) => {
-                                        person_topics.insert(person.clone(), outbox);
-                                    }
-                                    Err(e) => {
-                                        tracing::warn!("no ROS4HRI topic for {person}: {e:#}");
-                                        continue;
-                                    }
-                                }
-                            }
-                            if let Some(outbox) = person_topics.get(&person) {
-                                outbox.send(level);
-                            }
-                        }
-                    }
+                if let Some(hri) = hri {
+                    hri.publish(persons.on_second(&second), shell);
                 }
             }
         };
@@ -131,21 +114,80 @@ async fn serve(args: Args) -> anyhow::Result<()> {
                         }
                     }
                     last_stamp = Some((stamp_ns, Instant::now()));
-                    publish_closed(&mut closed, &sources, &mut persons, &mut shell);
+                    publish_closed(&mut closed, &sources, &mut persons, &mut hri, &mut shell);
                 }
                 Some(g) = states.recv() => persons.on_game_state(&g),
                 _ = tick.tick() => {
                     if let Some((stamp, at)) = last_stamp {
                         let now = stamp + at.elapsed().as_nanos() as i64;
                         estimator.advance_to(now, &mut |s| closed.push(*s));
-                        publish_closed(&mut closed, &sources, &mut persons, &mut shell);
+                        publish_closed(&mut closed, &sources, &mut persons, &mut hri, &mut shell);
                     }
                 }
             }
         }
         estimator.flush(&mut |s| closed.push(*s));
-        publish_closed(&mut closed, &sources, &mut persons, &mut shell);
+        publish_closed(&mut closed, &sources, &mut persons, &mut hri, &mut shell);
+        if let Some(hri) = &mut hri {
+            hri.publish(persons.close(node_shell::header_now().stamp), &mut shell);
+        }
     }
     shell.stop().await;
     Ok(())
+}
+
+/// The ROS4HRI topics: the two lists, and each reported person's own.
+struct Ros4Hri {
+    tracked: Outbox<IdsList>,
+    known: Outbox<IdsList>,
+    /// One pair of publishers per person reported now (a few at most); dropped when the
+    /// person ends, so its topics leave the graph.
+    persons: HashMap<String, PersonTopics>,
+}
+
+struct PersonTopics {
+    /// Latched: kept for libhri's subscription made once the lists name the person.
+    anonymous: Outbox<BoolMsg>,
+    engagement: Outbox<EngagementLevel>,
+}
+
+impl Ros4Hri {
+    fn publish(&mut self, outputs: Vec<HriOutput>, shell: &mut NodeShell) {
+        for o in outputs {
+            match o {
+                HriOutput::NewPerson { person, anonymous } => {
+                    let topics = shell.publisher(person_anonymous(&person)).and_then(|a| {
+                        Ok(PersonTopics {
+                            engagement: shell.publisher(engagement_status(&person))?,
+                            anonymous: a,
+                        })
+                    });
+                    match topics {
+                        Ok(topics) => {
+                            topics.anonymous.send(anonymous);
+                            tracing::info!("ROS4HRI: a face seen, person {person}");
+                            self.persons.insert(person, topics);
+                        }
+                        Err(e) => tracing::warn!("no ROS4HRI topics for {person}: {e:#}"),
+                    }
+                }
+                HriOutput::Engagement { person, level } => {
+                    if let Some(topics) = self.persons.get(&person) {
+                        topics.engagement.send(level);
+                    }
+                }
+                HriOutput::Tracked(ids) => {
+                    self.tracked.send(ids);
+                }
+                HriOutput::Known(ids) => {
+                    self.known.send(ids);
+                }
+                HriOutput::PersonGone { person } => {
+                    if self.persons.remove(&person).is_some() {
+                        tracing::info!("ROS4HRI: person {person} ended");
+                    }
+                }
+            }
+        }
+    }
 }
