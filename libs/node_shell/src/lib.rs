@@ -1,9 +1,11 @@
 //! The shared DDS shell of every node in the suite: the only crate that touches ros2-client.
 //! It reads `params/<node>.yaml` (ROS 2 parameter-file form), joins the ROS 2 graph with the
 //! QoS each topic class needs, delivers validated messages on channels, logs to stderr and
-//! `/rosout`, publishes a heartbeat and exits cleanly on SIGINT/SIGTERM. Node cores stay
+//! `/rosout`, publishes a heartbeat, exits cleanly on SIGINT/SIGTERM, and exits non-zero if
+//! RustDDS's threads end (so that it is started again). Node cores stay
 //! sans-IO: their binaries only move messages between these channels and the core.
 
+pub mod dds_watch;
 pub mod drops;
 pub mod instance_lock;
 pub mod logging;

@@ -1,7 +1,8 @@
 //! The DDS side of every node: builds the RustDDS participant (domain id and localhost-only
 //! from the ROS 2 environment variables), the ros2-client node and its spinner, typed
-//! publishers, validated subscriptions and services over channels, a heartbeat, and a clean
-//! exit on SIGINT/SIGTERM. Node logic never sees any of this: it gets messages from channels.
+//! publishers, validated subscriptions and services over channels, a heartbeat, a clean
+//! exit on SIGINT/SIGTERM, and an exit (code 70) if RustDDS's threads end (`dds_watch`).
+//! Node logic never sees any of this: it gets messages from channels.
 
 use crate::drops::DropLog;
 use crate::logging::init_logging;
@@ -246,6 +247,9 @@ pub struct NodeShell {
     // Tasks that own DDS entities: stopped before the participant goes, so RustDDS can
     // remove them cleanly.
     tasks: Vec<tokio::task::JoinHandle<()>>,
+    // Ends the process if RustDDS's threads end; dropped (stopped) before the participant,
+    // whose threads end at a clean stop too.
+    _dds_watch: Option<crate::dds_watch::ThreadWatch>,
     // Kept so the DDS participant outlives every entity created from it.
     _context: Context,
 }
@@ -289,6 +293,10 @@ impl NodeShell {
                 Some(enclave)
             }
         };
+        // RustDDS's threads before the participant, so that its own are told apart.
+        let rustdds_threads_before =
+            crate::dds_watch::rustdds_threads(Path::new(crate::dds_watch::TASK_DIR))
+                .unwrap_or_default();
         let participant = builder.build().with_context(|| match &enclave {
             Some(e) => {
                 format!("creating the secured DDS participant (enclave {e}) in domain {domain}")
@@ -336,6 +344,9 @@ impl NodeShell {
             params = %params_path.display(),
             "node started"
         );
+        // Last before the shell owns it: an error above drops the participant, whose threads
+        // then end, and that is no reason to exit 70.
+        let dds_watch = crate::dds_watch::watch_participant(&name, &rustdds_threads_before);
         let mut shell = NodeShell {
             node,
             name,
@@ -343,6 +354,7 @@ impl NodeShell {
             drops: Arc::new(DropLog::default()),
             shutdown,
             tasks: vec![spinner_task, rosout_drain],
+            _dds_watch: dds_watch,
             _context: context,
         };
         shell.start_heartbeat()?;
