@@ -3,6 +3,7 @@
 
 use launcher::description;
 mod supervisor;
+mod watchdog;
 
 use anyhow::Context;
 use clap::Parser;
@@ -65,6 +66,13 @@ async fn main() -> anyhow::Result<()> {
         anyhow::bail!("--grace {} is not a number of seconds", cli.grace);
     }
     let log_dir = cli.log_dir.unwrap_or_else(default_log_dir);
-    let code = supervisor::run(specs, Duration::from_secs_f64(cli.grace), &log_dir).await?;
+    let watchdog = watchdog::Watchdog::from_env().context("systemd's watchdog")?;
+    let code = supervisor::run(
+        specs,
+        Duration::from_secs_f64(cli.grace),
+        &log_dir,
+        watchdog,
+    )
+    .await?;
     std::process::exit(code);
 }

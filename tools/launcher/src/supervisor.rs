@@ -1,8 +1,10 @@
 //! Runs the processes of a launch description: starts each with its output prefixed by its
 //! name on the terminal, or in its log file (`output: log`), reports a process that dies,
 //! respawns those marked `respawn`, and stops everything (SIGINT, then SIGKILL after a grace
-//! period) on Ctrl-C, SIGTERM or an `on_exit: shutdown`.
+//! period) on Ctrl-C, SIGTERM or an `on_exit: shutdown`. Under systemd's watchdog it feeds the
+//! watchdog while every node it runs is alive (`crate::watchdog`).
 
+use crate::watchdog::{self, Watchdog};
 use launcher::description::ProcessSpec;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
@@ -95,6 +97,10 @@ fn start(
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
+        // The watchdog is the launcher's to feed, not the nodes'.
+        .env_remove(watchdog::ENVIRONMENT[0])
+        .env_remove(watchdog::ENVIRONMENT[1])
+        .env_remove(watchdog::ENVIRONMENT[2])
         // Own process group: a terminal's Ctrl-C reaches only us, and we stop the nodes in order.
         .process_group(0)
         .kill_on_drop(true);
@@ -158,9 +164,54 @@ fn describe(code: Option<i32>, signal: Option<i32>) -> String {
     }
 }
 
+/// Looks at the running nodes: feeds the watchdog when every one is alive, and says when that
+/// changes (`frozen`: what was found not alive at the last look).
+fn look_at_nodes(
+    running: &HashMap<String, u32>,
+    watchdog: &Watchdog,
+    frozen: &mut Vec<String>,
+    feed_failed: &mut bool,
+) {
+    let mut now: Vec<String> = running
+        .iter()
+        .filter_map(|(name, pid)| {
+            watchdog::not_alive(*pid).map(|why| format!("{name} (pid {pid}) is {why}"))
+        })
+        .collect();
+    now.sort();
+    if now.is_empty() {
+        match watchdog.feed() {
+            Ok(()) => *feed_failed = false,
+            Err(e) if !*feed_failed => {
+                say(&format!("could not feed systemd's watchdog: {e}"));
+                *feed_failed = true;
+            }
+            Err(_) => {}
+        }
+    }
+    if now != *frozen {
+        if now.is_empty() {
+            say("every node is alive again: feeding systemd's watchdog");
+        } else {
+            say(&format!(
+                "{}: not feeding systemd's watchdog; if this lasts {:?}, systemd restarts \
+                 the service",
+                now.join(", "),
+                watchdog.timeout
+            ));
+        }
+        *frozen = now;
+    }
+}
+
 /// Runs `specs` to the end, the logs of those with `output: log` or `both` in `log_dir`;
-/// returns the launcher's exit code.
-pub async fn run(specs: Vec<ProcessSpec>, grace: Duration, log_dir: &Path) -> anyhow::Result<i32> {
+/// returns the launcher's exit code. With `watchdog`, feeds it while every node is alive.
+pub async fn run(
+    specs: Vec<ProcessSpec>,
+    grace: Duration,
+    log_dir: &Path,
+    watchdog: Option<Watchdog>,
+) -> anyhow::Result<i32> {
     let logged: Vec<&str> = specs
         .iter()
         .filter(|s| s.output.to_log())
@@ -210,6 +261,16 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration, log_dir: &Path) -> an
         return Ok(1);
     }
     let mut exit_code = 0;
+    // The looks run in this loop, so a launcher stuck anywhere in it stops feeding too.
+    let mut look = watchdog.as_ref().map(|w| {
+        say(&format!(
+            "feeding systemd's watchdog (WatchdogSec {:?}) while every node is alive",
+            w.timeout
+        ));
+        tokio::time::interval(w.look_every())
+    });
+    let mut frozen = Vec::new();
+    let mut feed_failed = false;
     loop {
         if running.is_empty() && !by_name.values().any(|s| s.respawn) {
             break;
@@ -218,6 +279,17 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration, log_dir: &Path) -> an
             _ = interrupt.recv() => { say("Ctrl-C: stopping all nodes"); break; }
             _ = terminate.recv() => { say("SIGTERM: stopping all nodes"); break; }
             e = rx.recv() => match e { Some(e) => e, None => break },
+            _ = async {
+                match look.as_mut() {
+                    Some(l) => { l.tick().await; }
+                    None => std::future::pending::<()>().await,
+                }
+            } => {
+                if let Some(w) = &watchdog {
+                    look_at_nodes(&running, w, &mut frozen, &mut feed_failed);
+                }
+                continue;
+            }
         };
         match event {
             Event::Exited { name, code, signal } => {
@@ -279,17 +351,21 @@ pub async fn run(specs: Vec<ProcessSpec>, grace: Duration, log_dir: &Path) -> an
 }
 
 /// SIGINT to every running process, then SIGKILL to those still there after `grace`.
-/// Returns true when all stopped by themselves.
+/// SIGCONT follows the SIGINT, as systemd does, so a stopped node (SIGSTOP, a debugger) wakes
+/// to stop cleanly. Returns true when all stopped by themselves.
 async fn stop_all(
     running: &mut HashMap<String, u32>,
     rx: &mut mpsc::UnboundedReceiver<Event>,
     grace: Duration,
 ) -> bool {
     for (name, pid) in running.iter() {
-        if let Ok(pid) = i32::try_from(*pid)
-            && let Err(e) = kill(Pid::from_raw(pid), Signal::SIGINT)
-        {
-            say(&format!("could not signal {name}: {e}"));
+        if let Ok(pid) = i32::try_from(*pid) {
+            match kill(Pid::from_raw(pid), Signal::SIGINT) {
+                Ok(()) => {
+                    let _ = kill(Pid::from_raw(pid), Signal::SIGCONT);
+                }
+                Err(e) => say(&format!("could not signal {name}: {e}")),
+            }
         }
     }
     let deadline = tokio::time::Instant::now() + grace;

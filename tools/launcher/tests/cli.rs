@@ -152,3 +152,114 @@ fn a_broken_launch_file_is_refused_by_name_before_anything_starts() {
         "the valid first node ran although the file is broken: {context}"
     );
 }
+
+/// Under systemd's watchdog (`WATCHDOG_USEC`, `NOTIFY_SOCKET`, here a socket of the test's in
+/// the place of systemd's): `WATCHDOG=1` keeps coming while every node is alive, stops while
+/// one is stopped (SIGSTOP) and comes again after its SIGCONT; the nodes do not inherit the
+/// watchdog's variables; a node still stopped when the launch stops is woken (SIGCONT after
+/// its SIGINT) and stops by the SIGINT, not killed after the grace.
+#[test]
+fn the_watchdog_is_fed_only_while_every_node_is_alive() {
+    use nix::sys::signal::{Signal, kill};
+    use nix::unistd::Pid;
+    use std::os::unix::net::UnixDatagram;
+    use std::time::{Duration, Instant};
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let notify = dir.path().join("notify");
+    let systemd = UnixDatagram::bind(&notify).expect("binds the notify socket");
+    systemd
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .expect("timeout");
+    let file = dir.path().join("test.launch.yaml");
+    std::fs::write(
+        &file,
+        "launch:\n\
+         - executable:\n    cmd: sh -c 'env > frozen.env; echo $$ > frozen.pid; exec sleep 60'\n    name: frozen\n\
+         - executable:\n    cmd: sleep 60\n    name: steady\n",
+    )
+    .expect("writes the launch file");
+    let stderr_path = dir.path().join("stderr.log");
+    let mut launcher = std::process::Command::new(env!("CARGO_BIN_EXE_launch"))
+        .arg(&file)
+        .args(["--grace", "5"])
+        .current_dir(dir.path())
+        .env("NOTIFY_SOCKET", &notify)
+        .env("WATCHDOG_USEC", "400000")
+        .env_remove("WATCHDOG_PID")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::fs::File::create(&stderr_path).expect("stderr file"))
+        .spawn()
+        .expect("runs launch");
+    let pid_file = dir.path().join("frozen.pid");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let frozen = loop {
+        if let Some(pid) = std::fs::read_to_string(&pid_file)
+            .ok()
+            .and_then(|p| p.trim().parse::<i32>().ok())
+        {
+            break Pid::from_raw(pid);
+        }
+        assert!(Instant::now() < deadline, "the node did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // Keep-alives received during `window`.
+    let count_for = |window: Duration| {
+        let end = Instant::now() + window;
+        let mut n = 0;
+        let mut buf = [0u8; 64];
+        while Instant::now() < end {
+            if let Ok(len) = systemd.recv(&mut buf) {
+                assert_eq!(&buf[..len], b"WATCHDOG=1");
+                n += 1;
+            }
+        }
+        n
+    };
+    let alive = count_for(Duration::from_millis(600));
+    kill(frozen, Signal::SIGSTOP).expect("stops the node");
+    // One look may have fed just before the stop.
+    count_for(Duration::from_millis(250));
+    let while_stopped = count_for(Duration::from_millis(800));
+    kill(frozen, Signal::SIGCONT).expect("continues the node");
+    let after = count_for(Duration::from_millis(600));
+    // Stopped again, then the launch stops: the SIGCONT after the SIGINT lets it stop itself.
+    kill(frozen, Signal::SIGSTOP).expect("stops the node");
+    std::thread::sleep(Duration::from_millis(300));
+    kill(
+        Pid::from_raw(i32::try_from(launcher.id()).expect("a pid")),
+        Signal::SIGINT,
+    )
+    .expect("interrupts the launcher");
+    let status = launcher.wait().expect("the launcher ends");
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+    let context =
+        format!("alive {alive}, stopped {while_stopped}, after {after}; exit {status:?}\n{stderr}");
+    assert!(alive >= 3, "{context}");
+    assert_eq!(while_stopped, 0, "{context}");
+    assert!(after >= 3, "{context}");
+    assert!(
+        stderr.contains("feeding systemd's watchdog (WatchdogSec 400ms) while every node is alive"),
+        "{context}"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "frozen (pid {frozen}) is stopped: not feeding systemd's watchdog"
+        )),
+        "{context}"
+    );
+    assert!(
+        stderr.contains("every node is alive again: feeding systemd's watchdog"),
+        "{context}"
+    );
+    assert!(
+        stderr.contains("[launch] frozen stopped (signal SIGINT)"),
+        "{context}"
+    );
+    assert_eq!(status.code(), Some(0), "{context}");
+    let env = std::fs::read_to_string(dir.path().join("frozen.env")).expect("the node's env");
+    assert!(
+        !env.contains("NOTIFY_SOCKET") && !env.contains("WATCHDOG_USEC"),
+        "{env}"
+    );
+}
