@@ -44,6 +44,13 @@ struct Cli {
     /// at the end of the session.
     #[arg(long)]
     emergency_stop_at: Option<u8>,
+    /// Press the emergency stop `--emergency-stop-after-ms` after the robot starts saying a
+    /// line containing this (as a stand-in robot's echo on /qt_robot/speech/say tells), so the
+    /// press lands mid-sentence; the run then ends at the emergency-stopped state.
+    #[arg(long)]
+    emergency_stop_during: Option<String>,
+    #[arg(long, default_value_t = 0)]
+    emergency_stop_after_ms: u64,
     /// Steps whose decisions come from a hot state (temperature 250): the game manager, under
     /// supervised autonomy, proposes them to the therapist.
     #[arg(long, value_delimiter = ',')]
@@ -203,6 +210,8 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
     let mut emergency_sent = false;
     // Faces seen of the sequence the emergency stop is pressed in.
     let mut emergency_faces: Option<u8> = None;
+    // The press timed from a line the robot started (--emergency-stop-during).
+    let (press_tx, mut press) = tokio::sync::mpsc::channel::<()>(1);
     let mut next_command_id = 10;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     let deadline = tokio::time::sleep(Duration::from_secs(cli.timeout_s));
@@ -283,7 +292,26 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                     }
                 }
             }
-            Some(s) = speech.recv() => emit(serde_json::json!({"event": "speech", "data": s.data})),
+            Some(s) = speech.recv() => {
+                emit(serde_json::json!({"event": "speech", "data": s.data, "at_ns": now_nanos()}));
+                if let Some(during) = &cli.emergency_stop_during
+                    && s.data.contains(during.as_str())
+                    && !emergency_sent
+                {
+                    let tx = press_tx.clone();
+                    let after = Duration::from_millis(cli.emergency_stop_after_ms);
+                    tokio::spawn(async move {
+                        tokio::time::sleep(after).await;
+                        let _ = tx.send(()).await;
+                    });
+                }
+            }
+            Some(()) = press.recv(), if !emergency_sent => {
+                emit(serde_json::json!({"event": "emergency_stop", "at_ns": now_nanos()}));
+                commands.send(command(TherapistCommand::EMERGENCY_STOP, &cli.session, next_command_id));
+                next_command_id += 1;
+                emergency_sent = true;
+            }
             Some(t) = tasks.recv() => {
                 if t.session_id != cli.session || cli.silent.contains(&t.sequence_index) {
                     continue;

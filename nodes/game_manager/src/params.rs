@@ -86,6 +86,10 @@ pub struct GameManagerParams {
     pub robot_call_timeout_s: f64,
     /// `qtrobot`, `qtrobot_ros2`: the gesture speed factor sent with every gesture.
     pub robot_gesture_speed: f64,
+    /// `qtrobot_ros2`: the namespace of a second gateway process kept for stopping the robot
+    /// (the gateway serves one call at a time, so its own cancel waits for the sentence under
+    /// way); the emergency stop's cancel goes there. "": through the robot's gateway.
+    pub qtrobot_ros2_stop_namespace: String,
     /// Supervised autonomy: a decision the policy is unsure of is proposed to the therapist
     /// (ActionProposal) and played when accepted, replaced, or when its countdown runs out.
     pub supervised_autonomy: bool,
@@ -116,6 +120,12 @@ impl RobotBackend {
     /// rather than for estimated speaking times.
     pub fn answers_when_done(self) -> bool {
         self != RobotBackend::Topics
+    }
+
+    /// Whether the robot serves one call at a time, so the game must ask for one at a time:
+    /// LuxAI's V3 gateway does (every service in one rclpy mutually exclusive callback group).
+    pub fn serves_one_call_at_a_time(self) -> bool {
+        self == RobotBackend::QtRobotRos2
     }
 }
 
@@ -192,6 +202,7 @@ impl Default for GameManagerParams {
             robot_backend: "topics".into(),
             robot_call_timeout_s: 60.0,
             robot_gesture_speed: 1.0,
+            qtrobot_ros2_stop_namespace: "/qtrobot_stop".into(),
             supervised_autonomy: false,
             propose_above_temperature: 100.0,
             propose_above_success_std: 0.3,
@@ -332,6 +343,21 @@ impl GameManagerParams {
             3600.0,
         )?;
         seconds("robot_gesture_speed", self.robot_gesture_speed, 0.0, 10.0)?;
+        let ns = &self.qtrobot_ros2_stop_namespace;
+        // "" or /name[/name...], each name a ROS name token.
+        let namespace = ns.starts_with('/')
+            && ns.split('/').skip(1).all(|part| {
+                part.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+                    && part.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            });
+        if !(ns.is_empty() || namespace) {
+            return bad(
+                "qtrobot_ros2_stop_namespace",
+                format!(
+                    "{ns:?} is not a ROS namespace such as \"/qtrobot_stop\" (or \"\" for none)"
+                ),
+            );
+        }
         if !(self.propose_above_temperature.is_finite() && self.propose_above_temperature >= 0.0) {
             return bad(
                 "propose_above_temperature",
@@ -502,7 +528,28 @@ mod tests {
                 },
                 "proposal_countdown_s",
             ),
+            (
+                GameManagerParams {
+                    qtrobot_ros2_stop_namespace: "qtrobot_stop".into(),
+                    ..Default::default()
+                },
+                "qtrobot_ros2_stop_namespace",
+            ),
+            (
+                GameManagerParams {
+                    qtrobot_ros2_stop_namespace: "/qtrobot stop/".into(),
+                    ..Default::default()
+                },
+                "qtrobot_ros2_stop_namespace",
+            ),
         ];
+        for ns in ["", "/qtrobot_stop", "/robot/stop_2"] {
+            let p = GameManagerParams {
+                qtrobot_ros2_stop_namespace: ns.into(),
+                ..Default::default()
+            };
+            assert_eq!(p.validate(), Ok(()), "{ns:?}");
+        }
         for (p, key) in cases {
             assert_eq!(p.validate().map_err(|e| e.key), Err(key));
         }

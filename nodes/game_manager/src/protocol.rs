@@ -52,7 +52,8 @@ pub enum Output {
     PlayGesture(String),
     /// `qtrobot` backend: the robot acts put out since the previous `AwaitRobot` (or since the
     /// start of this batch of outputs) are one step; answer with `Input::RobotDone` once every
-    /// call of it has returned, or `Input::RobotFailed`.
+    /// call of it has returned, or `Input::RobotFailed`. `qtrobot_ros2`: always one act, and
+    /// the next goes out only once this one is answered.
     AwaitRobot {
         step: u64,
     },

@@ -3,7 +3,9 @@
 //! qt_robot_interface; `qtrobot_ros2`: V3's gateway), where the calls of one step run together
 //! and the step is answered with `Input::RobotDone` once every call returned (or
 //! `Input::RobotFailed` with the reason: an error, a `false` status, no answer within
-//! `robot_call_timeout_s`).
+//! `robot_call_timeout_s`). For a V3 the core puts out one call per step, as its gateway
+//! serves one at a time; the silence (the emergency stop's cancel) goes to the stop gateway,
+//! a second gateway process under `qtrobot_ros2_stop_namespace` that nothing keeps busy.
 
 use game_manager::params::RobotBackend;
 use game_manager::{GameManagerParams, Input};
@@ -14,7 +16,7 @@ use qt_therapy_msgs::qt_robot_interface::{
 };
 use qt_therapy_msgs::qtrobot_interfaces as v3;
 use qt_therapy_msgs::std_msgs::StringMsg;
-use qt_therapy_msgs::topics::{ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH};
+use qt_therapy_msgs::topics::{ROBOT_EMOTION, ROBOT_GESTURE, ROBOT_SPEECH, Service};
 use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
@@ -60,10 +62,24 @@ pub enum RobotServices {
     /// V3: LuxAI's ROS 2 gateway.
     V3 {
         say: ServiceClient<v3::TtsEngineSayText>,
+        /// The stop gateway's cancel (or the robot's gateway's, with no stop namespace).
         cancel: ServiceClient<v3::TtsEngineCancel>,
         emotion: ServiceClient<v3::FaceEmotionShow>,
         gesture: ServiceClient<v3::GestureFilePlay>,
     },
+}
+
+/// `service`, named under the gateway's /qtrobot, under `namespace` instead.
+fn under<S: qt_therapy_msgs::ServiceDefinition>(
+    namespace: &str,
+    service: Service<S>,
+) -> Service<S> {
+    let tail = service
+        .name
+        .strip_prefix("/qtrobot")
+        .unwrap_or(service.name);
+    // Once, at start-up: service names live as long as the node.
+    Service::new(Box::leak(format!("{namespace}{tail}").into_boxed_str()))
 }
 
 impl Robot {
@@ -88,7 +104,10 @@ impl Robot {
             },
             RobotBackend::QtRobotRos2 => RobotServices::V3 {
                 say: shell.client(v3::SAY_TEXT)?,
-                cancel: shell.client(v3::TTS_CANCEL)?,
+                cancel: match params.qtrobot_ros2_stop_namespace.as_str() {
+                    "" => shell.client(v3::TTS_CANCEL)?,
+                    namespace => shell.client(under(namespace, v3::TTS_CANCEL))?,
+                },
                 emotion: shell.client(v3::EMOTION_SHOW)?,
                 gesture: shell.client(v3::GESTURE_FILE_PLAY)?,
             },
@@ -126,6 +145,22 @@ impl Robot {
                 "no {name} server within {wait:?}: sessions pause at the robot's first act \
                  until QTrobot's services answer ({hint})"
             );
+        }
+        if let RobotServices::V3 { cancel, .. } = services
+            && cancel.name() != v3::TTS_CANCEL.name
+        {
+            let stop = cancel.name();
+            if shell.wait_for_service(cancel, wait).await {
+                tracing::info!("QTrobot's stop gateway reachable ({stop})");
+            } else {
+                let namespace = stop.strip_suffix("/tts/engine/cancel").unwrap_or(stop);
+                tracing::warn!(
+                    "no {stop} server within {wait:?}: the emergency stop cannot cut the robot \
+                     short; it goes silent when the call under way ends. Start a second gateway \
+                     for stopping: python -m gateway.qtrobot_ros2 --ros-args -p \
+                     robot_ip:=<ROBOT_IP> -r __ns:={namespace}"
+                );
+            }
         }
     }
 

@@ -333,7 +333,7 @@ impl GameManager {
         match self.phase {
             Phase::GivingFeedback | Phase::SayingSequence => {
                 // A half-said sequence is not fair to the child: say it again on resume.
-                self.robot_step = None;
+                self.drop_robot_step();
                 self.drop_timers(|t| {
                     !matches!(
                         t,

@@ -12,6 +12,7 @@ mod outcome;
 mod present;
 mod propose;
 mod recover;
+mod robot;
 #[cfg(test)]
 mod tests;
 mod watch;
@@ -22,7 +23,7 @@ use crate::params::{GameManagerParams, ParamError};
 use crate::protocol::{Input, LogLevel, Output};
 use crate::sequence::SessionRng;
 use crate::session_file::SessionEnd;
-use crate::utterances::{RobotAct, Utterances};
+use crate::utterances::Utterances;
 use heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::sequence_engagement::EngagementLog;
@@ -183,11 +184,8 @@ pub struct GameManager {
     status: String,
     /// The therapist command answered last, as every GameState tells it.
     answered: CommandAnswer,
-    /// The robot's calls are waited for (`qtrobot` backend) instead of timed.
-    robot_waits: bool,
-    /// The robot step under way and what follows it.
-    robot_step: Option<(u64, Timer)>,
-    next_robot_step: u64,
+    /// The robot's steps and calls (`robot.rs`).
+    robot: robot::RobotSteps,
     /// The user models' tables the σ rule of supervised autonomy reads (empty: rule off).
     user_models: Vec<UserModelTable>,
     out: Vec<Output>,
@@ -206,7 +204,7 @@ struct CommandAnswer {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
-        let robot_waits = params.robot_backend()?.answers_when_done();
+        let robot = robot::RobotSteps::new(params.robot_backend()?);
         let watched = HeartbeatWatch::with_timeout_s(
             params.watched_nodes.iter().cloned(),
             params.node_loss_timeout_s,
@@ -227,9 +225,7 @@ impl GameManager {
             twins: Vec::new(),
             status: "waiting for a therapist to start a session".into(),
             answered: CommandAnswer::default(),
-            robot_waits,
-            robot_step: None,
-            next_robot_step: 1,
+            robot,
             user_models: Vec::new(),
             out: Vec::new(),
         })
@@ -291,6 +287,7 @@ impl GameManager {
                 }
             }
         }
+        self.settle_robot();
         std::mem::take(&mut self.out)
     }
 
@@ -318,78 +315,6 @@ impl GameManager {
 
     fn log(&mut self, level: LogLevel, message: String) {
         self.out.push(Output::Log { level, message });
-    }
-
-    /// What follows the robot acts just put out: at `estimate_ns` (`topics` backend), or when
-    /// the robot says it has finished them (`qtrobot`).
-    fn after_robot(&mut self, then: Timer, estimate_ns: i64) {
-        if self.robot_waits {
-            let step = self.next_robot_step;
-            self.next_robot_step += 1;
-            self.robot_step = Some((step, then));
-            self.out.push(Output::AwaitRobot { step });
-        } else {
-            self.set_timer(then, estimate_ns);
-        }
-    }
-
-    /// The robot finished step `step`: what was waiting for it goes on (an old step, one a
-    /// pause or stop left behind, changes nothing).
-    fn on_robot_done(&mut self, step: u64, now: i64) {
-        let Some((current, then)) = self.robot_step else {
-            return;
-        };
-        if current != step {
-            return;
-        }
-        self.robot_step = None;
-        self.on_timer(then, now);
-    }
-
-    /// The robot did not finish step `step`: the session pauses with the reason, and the
-    /// therapist's resume goes on from where it stopped (a feedback line or a sequence is said
-    /// again from its start; an introduction or reaction is not repeated).
-    fn on_robot_failed(&mut self, step: u64, reason: &str, now: i64) {
-        let Some((current, then)) = self.robot_step else {
-            return;
-        };
-        if current != step {
-            return;
-        }
-        self.robot_step = None;
-        if then == Timer::SpeechDone {
-            self.current.speech_done = true;
-        }
-        let paused = match self.session.as_mut() {
-            Some(s) if self.phase != Phase::Idle && !matches!(self.phase, Phase::Ended(_)) => {
-                s.paused_since.get_or_insert(now);
-                true
-            }
-            _ => false,
-        };
-        if paused {
-            self.suspend(now);
-            self.out.push(Output::LiveLine(format!(
-                "!! the robot did not finish ({reason}): session paused; resume to go on"
-            )));
-            self.status = format!("the robot did not finish ({reason}): paused, resume to go on");
-            self.publish_state(now);
-        } else {
-            self.log(
-                LogLevel::WARN,
-                format!("the robot did not finish ({reason})"),
-            );
-        }
-    }
-
-    fn act(&mut self, act: RobotAct) {
-        if let Some(e) = act.emotion {
-            self.out.push(Output::ShowEmotion(e));
-        }
-        if let Some(g) = act.gesture {
-            self.out.push(Output::PlayGesture(g));
-        }
-        self.out.push(Output::Say(act.speech));
     }
 
     fn set_phase(&mut self, phase: Phase, status: String, now: i64) {

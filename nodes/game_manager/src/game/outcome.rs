@@ -175,7 +175,7 @@ impl GameManager {
     /// the robot at once on an emergency stop, and writes the summary.
     pub(super) fn end_session(&mut self, end: SessionEnd, reason: &str, now: i64) {
         if end == SessionEnd::EmergencyStopped {
-            self.out.push(Output::Say(String::new()));
+            self.silence_robot(now);
         }
         if self.phase == Phase::Settling {
             self.finalize(now, false);
@@ -193,7 +193,7 @@ impl GameManager {
         }
         self.withdraw_proposal(now);
         self.timers.clear();
-        self.robot_step = None;
+        self.drop_robot_step();
         self.current = Current::default();
         let Some(s) = self.session.as_mut() else {
             return;

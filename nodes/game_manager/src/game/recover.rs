@@ -25,7 +25,7 @@ impl GameManager {
     /// Takes over `r` at start-up, in place of [`GameManager::initial_outputs`].
     pub fn recover(&mut self, r: RecoveredSession, now: i64) -> Vec<Output> {
         // Silence first: the dead node's last line may still be playing.
-        self.out.push(Output::Say(String::new()));
+        self.silence_robot(now);
         for d in &r.damage {
             self.log(
                 LogLevel::WARN,

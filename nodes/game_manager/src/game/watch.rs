@@ -148,7 +148,7 @@ impl GameManager {
             s.held_since = Some(now);
             if !was_paused {
                 // Silence first: the empty utterance stops the robot mid-sentence.
-                self.out.push(Output::Say(String::new()));
+                self.silence_robot(now);
                 self.suspend(now);
             }
         }

@@ -121,3 +121,215 @@ fn a_step_the_robot_does_not_finish_pauses_the_session_and_resume_says_it_again(
     assert!(results[0].outcome == 1);
     let _ = Input::RobotDone { step: 0 };
 }
+
+// QTrobot V3 (`qtrobot_ros2`): its gateway serves one call at a time, so the core asks for
+// one at a time.
+
+fn qtrobot_v3() -> GameManagerParams {
+    GameManagerParams {
+        robot_backend: "qtrobot_ros2".into(),
+        ..GameManagerParams::default()
+    }
+}
+
+/// Every robot call put out, with its time, checking that each `AwaitRobot` follows exactly
+/// one act (the silence, an empty utterance, is not a call anyone waits for).
+fn calls(h: &Harness) -> Vec<(i64, Output)> {
+    let mut act: Option<Output> = None;
+    let mut out = Vec::new();
+    for (t, o) in &h.log {
+        match o {
+            Output::Say(s) if s.is_empty() => {}
+            Output::Say(_) | Output::ShowEmotion(_) | Output::PlayGesture(_) => {
+                assert!(act.is_none(), "two acts in one call: {act:?}, {o:?}");
+                act = Some(o.clone());
+            }
+            Output::AwaitRobot { .. } => {
+                out.push((*t, act.take().expect("a call without an act")));
+            }
+            _ => {}
+        }
+    }
+    assert!(act.is_none(), "an act put out with no call: {act:?}");
+    out
+}
+
+fn is_act(o: &Output) -> bool {
+    matches!(o, Output::ShowEmotion(_) | Output::PlayGesture(_))
+        || matches!(o, Output::Say(s) if !s.is_empty())
+}
+
+/// Runs until the first word's face is the call under way; returns when it went out.
+fn until_the_first_words_face(h: &mut Harness) -> i64 {
+    h.run_until_true(120.0, |h| {
+        h.last_state().phase == GameState::SAYING_SEQUENCE
+            && calls(h)
+                .last()
+                .is_some_and(|(_, o)| matches!(o, Output::ShowEmotion(_)))
+    });
+    calls(h).last().expect("the face went out").0
+}
+
+#[test]
+fn a_v3_is_asked_for_one_call_at_a_time_each_face_before_its_word() {
+    let mut h = Harness::new(qtrobot_v3(), rule_policy(), scripted_child(vec![]));
+    // Every call takes the robot 0.5 s.
+    h.start("v");
+    h.run(3600.0);
+    let results = h.results();
+    assert_eq!(results.len(), 10);
+    assert!(
+        results.iter().all(|r| r.outcome == 1),
+        "the child saw every face"
+    );
+    let calls = calls(&h);
+    // Never a call while another is under way: the next goes out once the last returned.
+    assert!(calls.windows(2).all(|w| w[1].0 - w[0].0 >= ns(0.5)));
+    // The introduction: its face, its gesture, then its words.
+    let intro: Vec<&Output> = calls[..3].iter().map(|(_, o)| o).collect();
+    assert!(
+        matches!(
+            intro[..],
+            [
+                Output::ShowEmotion(_),
+                Output::PlayGesture(_),
+                Output::Say(_)
+            ]
+        ),
+        "{intro:?}"
+    );
+    // Each sequence: each word's face, then the word; the task once the last word returned.
+    for (task_at, task) in h.tasks() {
+        let r = results
+            .iter()
+            .find(|r| r.sequence_index == task.sequence_index)
+            .expect("a result for each task");
+        let before: Vec<&(i64, Output)> = calls.iter().filter(|(t, _)| *t < task_at).collect();
+        let words = &before[before.len() - 2 * r.sequence.len()..];
+        let expected: Vec<Output> = r
+            .sequence
+            .iter()
+            .flat_map(|e| {
+                [
+                    Output::ShowEmotion(format!("QT/{e}")),
+                    Output::Say(e.clone()),
+                ]
+            })
+            .collect();
+        let played: Vec<Output> = words.iter().map(|(_, o)| o.clone()).collect();
+        assert_eq!(played, expected);
+        assert_eq!(task_at, words[words.len() - 1].0 + ns(0.5));
+    }
+}
+
+#[test]
+fn a_pause_drops_the_rest_of_the_word_and_the_resume_waits_for_the_call_under_way() {
+    let mut h = Harness::new(qtrobot_v3(), rule_policy(), scripted_child(vec![]));
+    // Every call takes the robot 3 s.
+    h.robot = Box::new(|_| RobotReply::Done { after_s: 3.0 });
+    h.start("v");
+    let face_at = until_the_first_words_face(&mut h);
+    let face = calls(&h).len() - 1;
+    h.run_until(face_at + ns(0.2));
+    h.feed(cmd(C::PAUSE, "v", 2));
+    h.run_until(face_at + ns(0.4));
+    h.feed(cmd(C::RESUME, "v", 3));
+    h.run(3600.0);
+    let all = calls(&h);
+    // The word after the face never went out: the sequence began again with the same face,
+    // asked for only once the robot had shown the first (3 s), not while it did.
+    assert_eq!(all[face + 1].1, all[face].1);
+    assert!(all[face + 1].0 >= face_at + ns(3.0));
+    assert!(all.windows(2).all(|w| w[1].0 - w[0].0 >= ns(3.0)));
+    let results = h.results();
+    assert_eq!(results.len(), 10);
+    assert!(results.iter().all(|r| r.outcome == 1));
+}
+
+#[test]
+fn the_emergency_stop_silences_a_v3_first_and_asks_it_for_nothing_more() {
+    let mut h = Harness::new(qtrobot_v3(), rule_policy(), scripted_child(vec![]));
+    h.robot = Box::new(|_| RobotReply::Done { after_s: 1.0 });
+    h.start("v");
+    let face_at = until_the_first_words_face(&mut h);
+    h.run_until(face_at + ns(0.2));
+    let out = h.feed(cmd(C::EMERGENCY_STOP, "v", 2));
+    assert_eq!(out.first(), Some(&Output::Say(String::new())));
+    let stopped = h.log.len();
+    h.run(600.0);
+    assert!(
+        h.log[stopped..].iter().all(|(_, o)| !is_act(o)),
+        "nothing after the stop"
+    );
+    assert_eq!(h.last_state().phase, GameState::EMERGENCY_STOPPED);
+}
+
+#[test]
+fn a_stop_says_goodbye_to_a_v3_once_the_call_under_way_returned_one_call_at_a_time() {
+    let mut h = Harness::new(qtrobot_v3(), rule_policy(), scripted_child(vec![]));
+    h.robot = Box::new(|_| RobotReply::Done { after_s: 1.0 });
+    h.start("v");
+    let face_at = until_the_first_words_face(&mut h);
+    let n = calls(&h).len();
+    h.run_until(face_at + ns(0.2));
+    h.feed(cmd(C::STOP, "v", 2));
+    h.run(600.0);
+    let after: Vec<(i64, Output)> = calls(&h)[n..].to_vec();
+    let goodbye = h.gm.params().goodbye_en.clone();
+    assert_eq!(
+        after,
+        vec![
+            (face_at + ns(1.0), Output::PlayGesture("QT/bye".into())),
+            (face_at + ns(2.0), Output::Say(goodbye)),
+        ],
+        "the word is dropped; the goodbye follows the face, one call at a time"
+    );
+    assert_eq!(h.last_state().phase, GameState::STOPPED);
+}
+
+#[test]
+fn a_v3_cut_short_by_a_hold_is_no_failure_and_the_session_goes_on() {
+    const POLICY: &str = "behaviour_policy";
+    let params = GameManagerParams {
+        watched_nodes: vec![POLICY.into()],
+        ..qtrobot_v3()
+    };
+    let mut h = Harness::new(params, rule_policy(), scripted_child(vec![]));
+    // The policy's process dies at 5 s (lost at 8.9 s) and is back at 12 s.
+    h.heartbeats(POLICY, 20, T0, T0 + 5 * S);
+    h.heartbeats(POLICY, 21, T0 + 12 * S, T0 + 600 * S);
+    // The introduction's words (the third call) would take 10 s; the hold's silence cuts
+    // them short, and the gateway then answers `result: false`.
+    let mut n = 0;
+    h.robot = Box::new(move |_| {
+        n += 1;
+        if n == 3 {
+            RobotReply::Fail {
+                after_s: 10.0,
+                reason: "/qtrobot/tts/engine/say/text answered that it failed".into(),
+            }
+        } else {
+            RobotReply::Done { after_s: 0.5 }
+        }
+    });
+    h.start("v");
+    h.run_until(T0 + ns(8.9));
+    assert_eq!(h.gm.lost_nodes(), vec![POLICY]);
+    assert!(
+        h.outputs().any(|o| *o == Output::Say(String::new())),
+        "silenced at the loss"
+    );
+    h.run(3600.0);
+    assert!(
+        h.states()
+            .iter()
+            .all(|s| !s.status.contains("the robot did not finish")),
+        "the cut is the game's own silence, not a failure"
+    );
+    let results = h.results();
+    assert_eq!(
+        results.len(),
+        10,
+        "the session went on when the node was back"
+    );
+}
