@@ -4,11 +4,11 @@
 //! those of a QTrobot V3's ROS 2 gateway (`qtrobot_interfaces`: `/qtrobot/tts/engine/say/text`,
 //! `/tts/engine/cancel`, `/face/emotion/show`, `/gesture/file/play`), one call at a time as
 //! the gateway serves them (see [`Gateway`]). Each call takes as long as a robot would (speech:
-//! a time per character, at least `--say-min-ms`; a stop or cancel cuts the speech under way
-//! short), is printed as one JSON line when it starts (with when it was asked and which
-//! gateway serves it) and when it ends, and succeeds, or fails for the speech containing
-//! `--fail-say` (once), or answers only after `--hang-ms` for the speech containing
-//! `--hang-say` (once), as a robot that hung for a while would.
+//! a time per character; a stop or cancel cuts the speech under way short), is printed as one
+//! JSON line when it starts (with when it was asked and which gateway serves it) and when it
+//! ends, and succeeds, or fails for the speech containing `--fail-say` (once), or answers only
+//! after `--hang-ms` for the speech containing `--hang-say` (once), as a robot that hung for a
+//! while would.
 
 use clap::Parser;
 use node_shell::{NoParameters, NodeShell, Outbox, ServiceCall, ShellOptions, now_nanos};
@@ -34,9 +34,6 @@ struct Cli {
     /// Speaking time per character of text, ms.
     #[arg(long, default_value_t = 20)]
     ms_per_char: u64,
-    /// Shortest speaking time of any text, ms (a text-to-speech engine's latency).
-    #[arg(long, default_value_t = 0)]
-    say_min_ms: u64,
     /// Time an emotion or a gesture takes, ms.
     #[arg(long, default_value_t = 150)]
     animation_ms: u64,
@@ -112,7 +109,6 @@ impl Served {
 /// What the stand-in robot does, whichever services reach it.
 struct StandIn {
     per_char: Duration,
-    say_min: Duration,
     animation: Duration,
     hang_for: Duration,
     fail: Once,
@@ -134,8 +130,7 @@ impl StandIn {
         if let Some(echo) = &self.echo_speech {
             echo.send(StringMsg { data: text.clone() });
         }
-        let speaking =
-            tokio::time::sleep((self.per_char * text.chars().count() as u32).max(self.say_min));
+        let speaking = tokio::time::sleep(self.per_char * text.chars().count() as u32);
         let interrupted = tokio::select! {
             _ = speaking => false,
             _ = self.silence.notified() => true,
@@ -367,7 +362,6 @@ async fn main() -> anyhow::Result<()> {
     let (mut shell, NoParameters {}) = NodeShell::start("qtrobot_peer", &cli.shell)?;
     let robot = Arc::new(StandIn {
         per_char: Duration::from_millis(cli.ms_per_char),
-        say_min: Duration::from_millis(cli.say_min_ms),
         animation: Duration::from_millis(cli.animation_ms),
         hang_for: Duration::from_millis(cli.hang_ms),
         fail: Once::new(cli.fail_say.clone()),
