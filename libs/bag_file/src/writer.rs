@@ -5,6 +5,7 @@
 use crate::cdr;
 use crate::error::BagError;
 use crate::qos::offered_qos_yaml;
+use crate::scan::ChannelInfo;
 use qt_therapy_msgs::MessageDefinition;
 use qt_therapy_msgs::topics::Topic;
 use std::collections::BTreeMap;
@@ -194,6 +195,38 @@ impl<W: Write + Seek> BagWriter<W> {
             topic: topic.to_string(),
             type_name: type_name.to_string(),
             qos_yaml: qos_yaml.to_string(),
+            count: 0,
+        });
+        Ok(id)
+    }
+
+    /// Adds a channel as another bag declares it (its schema, message encoding and metadata
+    /// as they are), so a tool copying messages between bags keeps them; returns its id.
+    pub fn add_channel_like(&mut self, channel: &ChannelInfo) -> Result<u16, BagError> {
+        let bag = self.bag.clone();
+        let mcap = self.mcap()?;
+        let schema = match &channel.schema {
+            Some(s) => mcap
+                .add_schema(&s.name, &s.encoding, &s.data)
+                .map_err(|e| write_error(&bag, &format!("the schema of {}", s.name), e))?,
+            None => 0,
+        };
+        let id = mcap
+            .add_channel(
+                schema,
+                &channel.topic,
+                &channel.message_encoding,
+                &channel.metadata,
+            )
+            .map_err(|e| write_error(&bag, &format!("the channel of {}", channel.topic), e))?;
+        self.topics.entry(id).or_insert_with(|| TopicCount {
+            topic: channel.topic.clone(),
+            type_name: channel.type_name().to_string(),
+            qos_yaml: channel
+                .metadata
+                .get("offered_qos_profiles")
+                .cloned()
+                .unwrap_or_default(),
             count: 0,
         });
         Ok(id)

@@ -141,6 +141,75 @@ fn the_file_is_shaped_like_rosbag2s() {
 }
 
 #[test]
+fn channels_copied_from_another_bag_keep_their_schema_metadata_and_messages() {
+    let (bytes, _) = session_bytes(&options(Compression::Zstd));
+    let source = BagReader::from_bytes(&bytes, "source", &ReadOptions::default()).expect("reads");
+    let mut w = BagWriter::new(
+        std::io::Cursor::new(Vec::new()),
+        "copy",
+        &options(Compression::Lz4),
+    )
+    .expect("writer");
+    let mut ids = std::collections::BTreeMap::new();
+    for c in source.channels() {
+        ids.insert(c.id, w.add_channel_like(c).expect("channel"));
+    }
+    for m in source.raw_messages() {
+        let stamp = bag_file::Stamp {
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+            sequence: m.sequence,
+        };
+        w.write_cdr(ids[&m.channel_id], stamp, &m.data)
+            .expect("write");
+    }
+    let copy = w.finish().expect("finish").into_inner();
+    let copy = BagReader::from_bytes(&copy, "copy", &ReadOptions::default())
+        .expect("reads")
+        .strict()
+        .expect("undamaged");
+    let strip = |r: &BagReader| {
+        let mut channels: Vec<_> = r
+            .channels()
+            .map(|c| {
+                let s = c.schema.as_ref().expect("schema");
+                let schema = (s.name.clone(), s.encoding.clone(), s.data.clone());
+                (
+                    c.topic.clone(),
+                    c.message_encoding.clone(),
+                    schema,
+                    c.metadata.clone(),
+                )
+            })
+            .collect();
+        channels.sort();
+        channels
+    };
+    assert_eq!(strip(&copy), strip(&source));
+    let messages = |r: &BagReader| -> Vec<_> {
+        r.iter()
+            .map(|(c, m)| {
+                (
+                    c.topic.clone(),
+                    m.log_time,
+                    m.publish_time,
+                    m.sequence,
+                    m.data.clone(),
+                )
+            })
+            .collect()
+    };
+    assert_eq!(messages(&copy), messages(&source));
+    let (_, meta) = &copy.metadata()[0];
+    let text = &meta["serialized_metadata"];
+    assert!(
+        text.contains("name: /qt_therapy/game/state\n      type: qt_therapy_msgs/msg/GameState"),
+        "{text}"
+    );
+    assert!(text.contains("durability: transient_local"), "{text}");
+}
+
+#[test]
 fn file_bags_appear_when_finished_and_flushed_chunks_are_readable_meanwhile() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("session.mcap");
