@@ -368,7 +368,9 @@ fn fixture() -> (Fixture, [String; 3]) {
         _dir: dir,
     };
     for (path, _) in template.snapshot() {
-        let to = f.root.join(path.strip_prefix(&template.root).expect("below"));
+        let to = f
+            .root
+            .join(path.strip_prefix(&template.root).expect("below"));
         std::fs::create_dir_all(to.parent().expect("parent")).expect("dirs");
         std::fs::copy(&path, &to).expect("copies");
     }
