@@ -251,6 +251,13 @@ for (const l of [1, 2, 3]) {
 
 translatePage();
 updateButtons();
+// The PIN and the child's results cross the network readable by anyone on it: only over
+// plain HTTP to another computer (the bridge serves that only with allow_plain_http).
+const host = location.hostname;
+const loopback = host === "localhost" || host.startsWith("127.") || host === "[::1]";
+const unencrypted = location.protocol !== "https:" && !loopback;
+$("unencrypted").classList.toggle("hidden", !unencrypted);
+document.body.classList.toggle("unencrypted", unencrypted);
 const socket = connectSocket("/ws/therapist", onMessage, (online) => {
   $("offline").classList.toggle("hidden", online);
   if (!online) loggedIn = false;

@@ -1,9 +1,11 @@
 //! The tablet bridge: the child tablet and the therapist tablet as web pages served over
-//! HTTP + WebSocket, bridged to the suite's DDS topics. `bridge` is the sans-IO core that
-//! checks everything a tablet sends; `server` is the axum shell around it; `pages` holds the
-//! HTML/CSS/JS/SVG compiled into the binary (no build step, no external resources).
+//! HTTPS + WebSocket, bridged to the suite's DDS topics. `bridge` is the sans-IO core that
+//! checks everything a tablet sends; `server` is the axum shell around it, `tls` its TLS;
+//! `pages` holds the HTML/CSS/JS/SVG compiled into the binary (no build step, no external
+//! resources); `certificates` makes the robot's own CA and server certificate (`tablet_tls`).
 
 pub mod bridge;
+pub mod certificates;
 mod child;
 mod game;
 pub mod limits;
@@ -13,6 +15,7 @@ mod proposal;
 pub mod protocol;
 pub mod server;
 pub mod therapist;
+pub mod tls;
 pub mod watch;
 
 pub use bridge::{Bridge, ClientId, DdsInput, Now, Output};

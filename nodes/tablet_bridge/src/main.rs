@@ -1,5 +1,5 @@
-//! `tablet_bridge`: serves the child tablet (/child) and the therapist tablet (/therapist) and
-//! bridges them to DDS.
+//! `tablet_bridge`: serves the child tablet (/child) and the therapist tablet (/therapist),
+//! over HTTPS where its parameters name a certificate, and bridges them to DDS.
 //!   tablet_bridge                      (reads params/tablet_bridge.yaml)
 //!   QT_TABLET_PIN=8642 tablet_bridge --params-file my.yaml
 
@@ -10,7 +10,7 @@ use qt_therapy_msgs::topics::{
     ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
     TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
 };
-use tablet_bridge::server::{Publish, serve};
+use tablet_bridge::server::{Publish, serve, tls_config};
 use tablet_bridge::{DdsInput, TabletBridgeParams};
 use tokio::sync::mpsc;
 
@@ -19,9 +19,9 @@ use tokio::sync::mpsc;
     about = "The child and therapist tablets as web pages, bridged to the suite's DDS topics"
 )]
 struct Cli {
-    /// Check the parameters (the file, --param overrides, QT_TABLET_PIN) and ROS_DOMAIN_ID,
-    /// say what is wrong, and exit without starting (the installed service's start script
-    /// runs this before it starts the suite).
+    /// Check the parameters (the file, --param overrides, QT_TABLET_PIN, the certificate and
+    /// key they name) and ROS_DOMAIN_ID, say what is wrong, and exit without starting (the
+    /// installed service's start script runs this before it starts the suite).
     #[arg(long)]
     check: bool,
     #[command(flatten)]
@@ -29,7 +29,7 @@ struct Cli {
 }
 
 /// The bridge's parameters as it runs with them: the file, the overrides, then QT_TABLET_PIN,
-/// validated; errors name the file read.
+/// validated, and the certificate and key they name loaded; errors name the file read.
 fn checked(params: &mut TabletBridgeParams, path: &std::path::Path) -> anyhow::Result<()> {
     if let Ok(pin) = std::env::var("QT_TABLET_PIN") {
         params.pin = pin;
@@ -37,6 +37,7 @@ fn checked(params: &mut TabletBridgeParams, path: &std::path::Path) -> anyhow::R
     params
         .validate()
         .with_context(|| format!("{} (or QT_TABLET_PIN for the pin)", path.display()))?;
+    tls_config(params).with_context(|| format!("the certificate named in {}", path.display()))?;
     Ok(())
 }
 

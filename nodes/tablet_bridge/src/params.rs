@@ -1,14 +1,22 @@
 //! The tablet bridge's parameters (`params/tablet_bridge.yaml`) and their checks: where the
-//! pages are served, the therapist PIN, and the limits that keep a misbehaving tablet harmless.
+//! pages are served and with which certificate, the therapist PIN, and the limits that keep a
+//! misbehaving tablet harmless.
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
 
 /// `tablet_bridge.ros__parameters`.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TabletBridgeParams {
-    /// Address the HTTP + WebSocket server listens on.
+    /// Address the HTTPS + WebSocket server listens on.
     pub http_bind: String,
+    /// The server's certificate chain (PEM, its own first); empty: no TLS.
+    pub tls_cert_file: String,
+    /// The certificate's private key (PEM).
+    pub tls_key_file: String,
+    /// Serve plain HTTP on an address other computers reach (never needed on loopback).
+    pub allow_plain_http: bool,
     /// The therapist page's PIN (env `QT_TABLET_PIN` overrides it).
     pub pin: String,
     /// Page language: `en` or `de`.
@@ -36,6 +44,9 @@ impl Default for TabletBridgeParams {
     fn default() -> Self {
         TabletBridgeParams {
             http_bind: "127.0.0.1:8080".into(),
+            tls_cert_file: String::new(),
+            tls_key_file: String::new(),
+            allow_plain_http: false,
             pin: "1234".into(),
             language: "en".into(),
             ws_messages_per_second: 5.0,
@@ -65,6 +76,16 @@ pub const LANGUAGES: [&str; 2] = ["en", "de"];
 pub const MIN_PIN_LEN: usize = 4;
 
 impl TabletBridgeParams {
+    /// The certificate and key files, when the pages are served over HTTPS.
+    pub fn tls_files(&self) -> Option<(PathBuf, PathBuf)> {
+        (!self.tls_cert_file.is_empty()).then(|| {
+            (
+                self.tls_cert_file.clone().into(),
+                self.tls_key_file.clone().into(),
+            )
+        })
+    }
+
     /// Checks every value; the node refuses to start on the first bad one.
     pub fn validate(&self) -> Result<SocketAddr, InvalidParameter> {
         let bad = |key, reason: String| Err(InvalidParameter { key, reason });
@@ -77,6 +98,26 @@ impl TabletBridgeParams {
                 );
             }
         };
+        match (self.tls_cert_file.is_empty(), self.tls_key_file.is_empty()) {
+            (true, false) => {
+                return bad("tls_cert_file", "is empty but tls_key_file is set".into());
+            }
+            (false, true) => {
+                return bad("tls_key_file", "is empty but tls_cert_file is set".into());
+            }
+            (true, true) if !addr.ip().is_loopback() && !self.allow_plain_http => {
+                return bad(
+                    "tls_cert_file",
+                    format!(
+                        "is empty, so the pages (the PIN, a child's results) would cross the \
+                         network unencrypted on {addr}: name the certificate and key \
+                         (tls_cert_file, tls_key_file; `tablet_tls init` makes them), or set \
+                         allow_plain_http: true to serve plain HTTP all the same"
+                    ),
+                );
+            }
+            _ => {}
+        }
         if self.pin.chars().count() < MIN_PIN_LEN || self.pin.chars().any(char::is_control) {
             return bad(
                 "pin",
@@ -179,6 +220,43 @@ mod tests {
             assert_eq!(e.key, key);
             assert!(e.to_string().contains(key), "{e}");
         }
+    }
+
+    #[test]
+    fn plain_http_only_on_loopback_or_when_allowed_in_words() {
+        let on = |bind: &str| TabletBridgeParams {
+            http_bind: bind.into(),
+            ..TabletBridgeParams::default()
+        };
+        assert!(on("127.0.0.1:8080").validate().is_ok());
+        assert!(on("[::1]:8080").validate().is_ok());
+        for bind in ["0.0.0.0:8080", "10.0.0.5:8080", "[::]:8080"] {
+            let e = on(bind).validate().expect_err(bind);
+            assert_eq!(e.key, "tls_cert_file", "{e}");
+            assert!(e.reason.contains("allow_plain_http"), "{e}");
+            let allowed = TabletBridgeParams {
+                allow_plain_http: true,
+                ..on(bind)
+            };
+            assert!(allowed.validate().is_ok(), "{bind}");
+        }
+        let tls = TabletBridgeParams {
+            tls_cert_file: "/etc/qt-therapy/tls/server.crt".into(),
+            tls_key_file: "/etc/qt-therapy/tls/server.key".into(),
+            ..on("0.0.0.0:8080")
+        };
+        assert!(tls.validate().is_ok());
+        assert!(tls.tls_files().is_some());
+        let half = TabletBridgeParams {
+            tls_key_file: String::new(),
+            ..tls.clone()
+        };
+        assert_eq!(half.validate().map_err(|e| e.key), Err("tls_key_file"));
+        let half = TabletBridgeParams {
+            tls_cert_file: String::new(),
+            ..tls
+        };
+        assert_eq!(half.validate().map_err(|e| e.key), Err("tls_cert_file"));
     }
 
     #[test]

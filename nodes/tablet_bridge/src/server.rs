@@ -1,6 +1,7 @@
-//! The HTTP + WebSocket shell around the core (axum): serves the pages, upgrades `/ws/child`
-//! and `/ws/therapist` (same-origin only), and runs one task that owns the core and moves
-//! page messages, DDS messages and the clock through it. No decision is taken here.
+//! The HTTPS + WebSocket shell around the core (axum): serves the pages (over TLS when the
+//! parameters name a certificate, `tls`), upgrades `/ws/child` and `/ws/therapist`
+//! (same-origin only), and runs one task that owns the core and moves page messages, DDS
+//! messages and the clock through it. No decision is taken here.
 
 use crate::bridge::{Bridge, ClientId, DdsInput, Now, Output};
 use crate::pages::Pages;
@@ -36,6 +37,9 @@ const CLOSE_POLICY: u16 = 1008;
 
 const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; \
                    connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
+/// Over HTTPS: a browser that has been here once asks only for HTTPS for a year (a forged
+/// plain-HTTP page on the clinic's network cannot catch the PIN).
+const HSTS: &str = "max-age=31536000";
 
 enum Event {
     Connect {
@@ -56,20 +60,24 @@ enum Outgoing {
 struct Shared {
     events: mpsc::Sender<Event>,
     pages: Pages,
+    /// `https` or `http`: what a page's origin must say.
+    scheme: &'static str,
     /// Transport limit: above the core's limit, so an oversized message gets a reason first.
     max_frame: usize,
 }
 
-/// Whether a WebSocket upgrade comes from a page of this server. Browsers always send
-/// `Origin`; a page elsewhere must not drive the tablets (cross-site WebSocket hijacking).
-pub fn origin_allowed(origin: Option<&str>, host: Option<&str>) -> bool {
+/// Whether a WebSocket upgrade comes from a page of this server (`scheme`: `https` or
+/// `http`, as served). Browsers always send `Origin`; a page elsewhere, or this host's name
+/// over the other scheme, must not drive the tablets (cross-site WebSocket hijacking).
+pub fn origin_allowed(origin: Option<&str>, host: Option<&str>, scheme: &str) -> bool {
     let Some(origin) = origin else {
         return true;
     };
-    let (Some(host), Some((_, rest))) = (host, origin.split_once("://")) else {
+    let (Some(host), Some((origin_scheme, rest))) = (host, origin.split_once("://")) else {
         return false;
     };
-    rest.trim_end_matches('/').eq_ignore_ascii_case(host)
+    origin_scheme.eq_ignore_ascii_case(scheme)
+        && rest.trim_end_matches('/').eq_ignore_ascii_case(host)
 }
 
 /// Binds `params.http_bind` and serves until `shutdown` resolves.
@@ -86,6 +94,16 @@ pub async fn serve(
     serve_on(listener, params, dds_in, publish, shutdown).await
 }
 
+/// The TLS configuration the parameters name (None: plain HTTP), for `--check` and [`serve`].
+pub fn tls_config(
+    params: &TabletBridgeParams,
+) -> Result<Option<Arc<rustls::ServerConfig>>, crate::tls::TlsError> {
+    params
+        .tls_files()
+        .map(|(cert, key)| crate::tls::server_config(&cert, &key))
+        .transpose()
+}
+
 /// As [`serve`], on a listener the caller bound (tests bind port 0).
 pub async fn serve_on(
     listener: TcpListener,
@@ -94,12 +112,14 @@ pub async fn serve_on(
     publish: mpsc::Sender<Publish>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
+    let tls = tls_config(&params)?;
     let clock = Instant::now();
     let core = Bridge::new(params.clone(), now(clock));
     let (events, events_rx) = mpsc::channel(EVENT_QUEUE);
     let shared = Arc::new(Shared {
         events,
         pages: Pages::new(&params.language),
+        scheme: if tls.is_some() { "https" } else { "http" },
         max_frame: params
             .ws_max_message_bytes
             .saturating_mul(16)
@@ -107,16 +127,51 @@ pub async fn serve_on(
     });
     let (stop_tx, stop_rx) = watch::channel(false);
     let core_task = tokio::spawn(run_core(core, clock, events_rx, dds_in, publish, stop_rx));
-    tracing::info!(addr = %listener.local_addr()?, "serving the tablet pages: /child and /therapist");
-    axum::serve(listener, router(shared))
-        .with_graceful_shutdown(async move {
-            shutdown.await;
-            let _ = stop_tx.send(true);
-        })
-        .await
-        .context("serving HTTP")?;
+    let addr = listener.local_addr()?;
+    let shutdown = async move {
+        shutdown.await;
+        let _ = stop_tx.send(true);
+    };
+    match tls {
+        Some(config) => {
+            tracing::info!(
+                %addr,
+                certificate = %params.tls_cert_file,
+                "serving the tablet pages over HTTPS: /child and /therapist"
+            );
+            let app = router(shared).layer(axum::middleware::map_response(hsts));
+            let listener = crate::tls::TlsListener::new(listener, config)?;
+            axum::serve(listener, app)
+                .with_graceful_shutdown(shutdown)
+                .await
+                .context("serving HTTPS")?;
+        }
+        None => {
+            if addr.ip().is_loopback() {
+                tracing::info!(%addr, "serving the tablet pages over plain HTTP on loopback: /child and /therapist");
+            } else {
+                tracing::warn!(
+                    %addr,
+                    "serving the tablet pages UNENCRYPTED (allow_plain_http): the PIN and the \
+                     child's results cross the network in plain text"
+                );
+            }
+            axum::serve(listener, router(shared))
+                .with_graceful_shutdown(shutdown)
+                .await
+                .context("serving HTTP")?;
+        }
+    }
     core_task.await.context("the bridge core task")?;
     Ok(())
+}
+
+async fn hsts(mut response: Response) -> Response {
+    response.headers_mut().insert(
+        header::STRICT_TRANSPORT_SECURITY,
+        HeaderValue::from_static(HSTS),
+    );
+    response
 }
 
 fn now(clock: Instant) -> Now {
@@ -179,7 +234,7 @@ fn upgrade(s: Arc<Shared>, headers: &HeaderMap, ws: WebSocketUpgrade, role: Role
             .and_then(|v: &HeaderValue| v.to_str().ok())
     };
     let (origin, host) = (text(header::ORIGIN), text(header::HOST));
-    if !origin_allowed(origin, host) {
+    if !origin_allowed(origin, host, s.scheme) {
         tracing::warn!(?role, ?origin, ?host, "cross-origin WebSocket refused");
         return (StatusCode::FORBIDDEN, "cross-origin WebSocket refused").into_response();
     }
@@ -363,15 +418,21 @@ mod tests {
     #[test]
     fn only_same_origin_pages_may_open_a_websocket() {
         let host = Some("10.0.0.5:8080");
-        assert!(origin_allowed(Some("http://10.0.0.5:8080"), host));
-        assert!(origin_allowed(Some("HTTP://10.0.0.5:8080/"), host));
+        assert!(origin_allowed(Some("http://10.0.0.5:8080"), host, "http"));
+        assert!(origin_allowed(Some("HTTP://10.0.0.5:8080/"), host, "http"));
+        assert!(origin_allowed(Some("https://10.0.0.5:8080"), host, "https"));
         assert!(
-            origin_allowed(None, host),
+            origin_allowed(None, host, "https"),
             "non-browser clients send no Origin"
         );
-        assert!(!origin_allowed(Some("http://evil.example"), host));
-        assert!(!origin_allowed(Some("http://10.0.0.5:8081"), host));
-        assert!(!origin_allowed(Some("null"), host));
-        assert!(!origin_allowed(Some("http://10.0.0.5:8080"), None));
+        assert!(!origin_allowed(Some("http://evil.example"), host, "http"));
+        assert!(!origin_allowed(Some("https://evil.example"), host, "https"));
+        assert!(!origin_allowed(Some("http://10.0.0.5:8081"), host, "http"));
+        assert!(!origin_allowed(Some("null"), host, "http"));
+        assert!(!origin_allowed(Some("http://10.0.0.5:8080"), None, "http"));
+        // The same host over the other scheme is another origin: a plain-HTTP page
+        // (forged on the network) may not drive an HTTPS bridge.
+        assert!(!origin_allowed(Some("http://10.0.0.5:8080"), host, "https"));
+        assert!(!origin_allowed(Some("https://10.0.0.5:8080"), host, "http"));
     }
 }

@@ -35,17 +35,36 @@ fn a_bad_value_is_named_with_the_file_it_came_from() {
 }
 
 /// `--check` says what is wrong without joining DDS: the package's empty PIN until
-/// QT_TABLET_PIN sets one, a ROS_DOMAIN_ID out of range; and passes a setting it can run with.
+/// QT_TABLET_PIN sets one, a ROS_DOMAIN_ID out of range, an address other computers reach
+/// without a certificate, a certificate or key it cannot load; and passes a setting it can run
+/// with (the installed one: every address, the robot's own certificate).
 #[test]
 fn check_names_a_missing_pin_and_a_bad_domain_and_passes_a_good_setting() {
     let bin = env!("CARGO_BIN_EXE_tablet_bridge");
     let dir = tempfile::tempdir().expect("temp dir");
+    let tls = dir.path().join("tls");
+    let made = std::process::Command::new(env!("CARGO_BIN_EXE_tablet_tls"))
+        .arg("--dir")
+        .arg(&tls)
+        .args(["init", "--only-names", "--name", "qtrobot.test"])
+        .output()
+        .expect("tablet_tls runs");
+    assert!(made.status.success(), "{made:?}");
     let file = dir.path().join("tablet_bridge.yaml");
-    std::fs::write(
-        &file,
-        "tablet_bridge:\n  ros__parameters:\n    http_bind: \"0.0.0.0:8080\"\n    pin: \"\"\n",
-    )
-    .expect("writes the parameter file");
+    let write = |tls_lines: &str| {
+        std::fs::write(
+            &file,
+            format!(
+                "tablet_bridge:\n  ros__parameters:\n    http_bind: \"0.0.0.0:8080\"\n    pin: \"\"\n{tls_lines}"
+            ),
+        )
+        .expect("writes the parameter file")
+    };
+    let installed = format!(
+        "    tls_cert_file: \"{0}/server.crt\"\n    tls_key_file: \"{0}/server.key\"\n",
+        tls.display()
+    );
+    write(&installed);
     let check = |pin: Option<&str>, domain: &str| {
         let mut c = std::process::Command::new(bin);
         c.args(["--check", "--params-file"])
@@ -76,6 +95,29 @@ fn check_names_a_missing_pin_and_a_bad_domain_and_passes_a_good_setting() {
     let (ok, out) = check(Some("8642"), "7");
     assert!(
         ok && out.contains("parameters and environment valid"),
+        "{out}"
+    );
+    // Every address, no certificate: refused, saying how to go on.
+    write("");
+    let (ok, out) = check(Some("8642"), "7");
+    assert!(
+        !ok && out.contains("tls_cert_file") && out.contains("allow_plain_http: true"),
+        "{out}"
+    );
+    write("    allow_plain_http: true\n");
+    let (ok, out) = check(Some("8642"), "7");
+    assert!(ok, "{out}");
+    // A key that is not there (a clinic's path mistyped), or not the certificate's.
+    write(&installed.replace("server.key", "clinic.key"));
+    let (ok, out) = check(Some("8642"), "7");
+    assert!(
+        !ok && out.contains("tls_key_file") && out.contains("clinic.key"),
+        "{out}"
+    );
+    write(&installed.replace("server.key", "ca.key"));
+    let (ok, out) = check(Some("8642"), "7");
+    assert!(
+        !ok && out.contains("is not the key of the certificate"),
         "{out}"
     );
 }

@@ -10,11 +10,14 @@
 //! both pages reconnect to it by themselves. Supervised autonomy is on and proposes every
 //! decision of the policy on the therapist page: one is accepted, one replaced by feedback, one
 //! by another level, one left to run out, the rest accepted at once, and what the game manager
-//! says of each over DDS must be what the page did. Everything runs inside one private
-//! loopback-only network namespace: the test re-runs itself in there.
+//! says of each over DDS must be what the page did. The pages are served over HTTPS with a
+//! certificate `tablet_tls` made for the robot's name, and Chromium trusts its CA as a tablet
+//! that installed it does (an NSS database made with `certutil`). Everything runs inside one
+//! private loopback-only network namespace: the test re-runs itself in there.
 //!
-//! Needs Debian's `chromium` and `chromium-driver` (skips with a message where they are absent)
-//! and the suite's binaries (`cargo build --workspace --bins`; tests/run.sh builds them first).
+//! Needs Debian's `chromium`, `chromium-driver` and `libnss3-tools` (skips with a message where
+//! they are absent) and the suite's binaries (`cargo build --workspace --bins`; tests/run.sh
+//! builds them first).
 //! Screenshots land in target/tablet_bridge_screenshots/ (or $TABLET_SCREENSHOT_DIR).
 
 mod support;
@@ -92,12 +95,7 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
         runtime.block_on(inner());
         return;
     }
-    if (which("chromium").is_none() || which("chromedriver").is_none())
-        && loopback_netns::skip_or_fail(
-            "chromium and chromedriver are not installed \
-             (apt-get update && apt-get install -y chromium chromium-driver)",
-        )
-    {
+    if browser_missing() {
         return;
     }
     for b in SUITE_BINARIES {
@@ -108,10 +106,7 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
             path.display()
         );
     }
-    let shots = std::env::var_os("TABLET_SCREENSHOT_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join("target/tablet_bridge_screenshots"));
-    std::fs::create_dir_all(&shots).expect("screenshot dir");
+    let shots = screenshot_dir();
     let Some(out) = loopback_netns::rerun_test_inside(
         TEST_NAME,
         &[
@@ -136,6 +131,104 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
         eprintln!("{line}");
     }
     eprintln!("browser test passed; screenshots in {}", shots.display());
+}
+
+/// True (after saying why) where the test cannot run: no Chromium, chromedriver or certutil.
+fn browser_missing() -> bool {
+    (which("chromium").is_none() || which("chromedriver").is_none() || which("certutil").is_none())
+        && loopback_netns::skip_or_fail(
+            "chromium, chromedriver or certutil is not installed \
+             (apt-get update && apt-get install -y chromium chromium-driver libnss3-tools)",
+        )
+}
+
+fn screenshot_dir() -> PathBuf {
+    let shots = std::env::var_os("TABLET_SCREENSHOT_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("target/tablet_bridge_screenshots"));
+    std::fs::create_dir_all(&shots).expect("screenshot dir");
+    shots
+}
+
+const PLAIN_TEST_NAME: &str = "the_therapist_page_says_when_it_is_served_unencrypted";
+const PLAIN_INNER: &str = "TABLET_PLAIN_TEST_INNER";
+
+/// The bridge alone (no game manager) with `allow_plain_http` on every address: the therapist
+/// page opened by the robot's name says its link is unencrypted; opened on loopback (the
+/// simulated session's case: nothing crosses a network) it does not.
+#[test]
+fn the_therapist_page_says_when_it_is_served_unencrypted() {
+    const PORT: u16 = 18090;
+    const DRIVER: u16 = 19516;
+    if std::env::var_os(PLAIN_INNER).is_some() {
+        let runtime = tokio::runtime::Runtime::new().expect("tokio runtime");
+        runtime.block_on(async {
+            let logs = Logs {
+                dir: tempfile::tempdir().expect("temp dir"),
+            };
+            let bridge = Guard::spawn(
+                "tablet_bridge",
+                Command::new(env!("CARGO_BIN_EXE_tablet_bridge"))
+                    .args(["--param", &format!("http_bind:=0.0.0.0:{PORT}")])
+                    .args(["--param", "allow_plain_http:=true"])
+                    .env("QT_TABLET_PIN", PIN)
+                    .stdout(logs.file("bridge.out"))
+                    .stderr(logs.file("bridge.err")),
+            );
+            let _driver = Guard::spawn(
+                "chromedriver",
+                Command::new("chromedriver")
+                    .args([format!("--port={DRIVER}"), "--allowed-ips=127.0.0.1".into()])
+                    .env("HOME", logs.dir.path())
+                    .stdout(logs.file("chromedriver.log"))
+                    .stderr(Stdio::null()),
+            );
+            until("the bridge and chromedriver", WAIT, || async {
+                (port_open(PORT) && port_open(DRIVER)).then_some(())
+            })
+            .await;
+            let profiles = tempfile::tempdir().expect("profiles");
+            let page = Page::open("therapist", DRIVER, profiles.path(), (1280, 800)).await;
+            for (host, warned) in [(ROBOT_HOST, true), ("127.0.0.1", false)] {
+                let url = format!("http://{host}:{PORT}/therapist");
+                page.client.goto(&url).await.expect("goto");
+                page.wait_text("#login", "Unlock", WAIT).await;
+                let hidden = page.count("#unencrypted.hidden").await == 1;
+                assert_eq!(!hidden, warned, "{url}");
+                if warned {
+                    let text = page.text("#unencrypted").await;
+                    assert!(text.starts_with("Unencrypted connection"), "{text}");
+                    page.screenshot(&screenshot_dir(), "therapist_unencrypted_1280x800")
+                        .await;
+                }
+            }
+            assert_eq!(bridge.interrupt(Duration::from_secs(10)), Some(0));
+            let log = logs.read("bridge.err");
+            assert!(log.contains("UNENCRYPTED"), "{log}");
+        });
+        return;
+    }
+    if browser_missing() {
+        return;
+    }
+    let shots = screenshot_dir();
+    let Some(out) = loopback_netns::rerun_test_inside(
+        PLAIN_TEST_NAME,
+        &[
+            (PLAIN_INNER, "1".as_ref()),
+            ("ROS_LOCALHOST_ONLY", "1".as_ref()),
+            ("TABLET_SCREENSHOT_DIR", shots.as_os_str()),
+        ],
+        Duration::from_secs(60),
+    ) else {
+        return;
+    };
+    assert!(
+        out.status.success(),
+        "inside the namespace:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 /// What the test heard over DDS: every utterance of the robot, the tasks (with how many
@@ -315,6 +408,25 @@ async fn inner() {
     std::fs::create_dir_all(&out).expect("out dir");
     let ears = Ears::start(logs.dir.path());
     let bin = bin_dir();
+    // The robot's own CA and a certificate for its name, as the package makes them at
+    // install, and a browser profile home that trusts the CA.
+    let tls = logs.dir.path().join("tls");
+    let made = Command::new(env!("CARGO_BIN_EXE_tablet_tls"))
+        .arg("--dir")
+        .arg(&tls)
+        .args([
+            "init",
+            "--only-names",
+            "--name",
+            ROBOT_HOST,
+            "--name",
+            "127.0.0.1",
+        ])
+        .output()
+        .expect("tablet_tls runs");
+    assert!(made.status.success(), "tablet_tls init: {made:?}");
+    let home = logs.dir.path().join("home");
+    home_trusting(&home, &tls.join("ca.crt"));
     let launch = Guard::spawn(
         "launch",
         Command::new(bin.join("launch"))
@@ -328,7 +440,9 @@ async fn inner() {
             ))
             .arg(format!(
                 "bridge_args:=--param http_bind:=127.0.0.1:{HTTP_PORT} \
-                 --param ws_max_dropped_before_close:=100"
+                 --param ws_max_dropped_before_close:=100 \
+                 --param tls_cert_file:={tls}/server.crt --param tls_key_file:={tls}/server.key",
+                tls = tls.display()
             ))
             .env("QT_TABLET_PIN", PIN)
             .stdout(logs.file("launch.out"))
@@ -341,6 +455,8 @@ async fn inner() {
                 format!("--port={DRIVER_PORT}"),
                 "--allowed-ips=127.0.0.1".into(),
             ])
+            // Chromium (started by chromedriver) finds its NSS database under $HOME.
+            .env("HOME", &home)
             .stdout(logs.file("chromedriver.log"))
             .stderr(Stdio::null()),
     );
@@ -952,25 +1068,38 @@ async fn refuse_bad_input(
 }
 
 async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
-    let base = format!("http://127.0.0.1:{HTTP_PORT}");
-    // A page elsewhere cannot open the tablets' WebSocket.
-    let forged = raw_http(
-        HTTP_PORT,
-        &format!(
-            "GET /ws/therapist HTTP/1.1\r\nHost: 127.0.0.1:{HTTP_PORT}\r\nOrigin: http://evil.example\r\n\
-             Connection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n\
-             Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
-        ),
-    );
-    assert!(forged.starts_with("HTTP/1.1 403"), "{forged}");
-    let page = raw_http(
-        HTTP_PORT,
-        "GET /child HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
-    );
-    assert!(
-        page.contains("content-security-policy: default-src 'none'"),
-        "{page}"
-    );
+    let base = format!("https://{ROBOT_HOST}:{HTTP_PORT}");
+    let tls = logs.dir.path().join("tls");
+    // A page elsewhere, or this host over plain http, cannot open the tablets' WebSocket.
+    for origin in [
+        "https://evil.example".to_string(),
+        format!("http://{ROBOT_HOST}:{HTTP_PORT}"),
+    ] {
+        let forged = raw_https(
+            HTTP_PORT,
+            &tls,
+            &format!(
+                "GET /ws/therapist HTTP/1.1\r\nHost: {ROBOT_HOST}:{HTTP_PORT}\r\nOrigin: {origin}\r\n\
+                 Connection: Upgrade\r\nUpgrade: websocket\r\nSec-WebSocket-Version: 13\r\n\
+                 Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
+            ),
+        )
+        .await;
+        assert!(forged.starts_with("HTTP/1.1 403"), "{origin}: {forged}");
+    }
+    for path in ["/child", "/therapist"] {
+        let page = raw_https(
+            HTTP_PORT,
+            &tls,
+            &format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"),
+        )
+        .await;
+        assert!(
+            page.contains("content-security-policy: default-src 'none'")
+                && page.contains("strict-transport-security: max-age="),
+            "{path}: {page}"
+        );
+    }
 
     let profiles = tempfile::tempdir().expect("profiles");
     let therapist = Page::open(
@@ -995,6 +1124,15 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
         .await
         .expect("goto");
     therapist.wait_text("#login", "Unlock", WAIT).await;
+    // Over HTTPS with the CA trusted: a secure page, no warning of an unencrypted link.
+    let secure = therapist
+        .js(
+            "return [location.protocol, window.isSecureContext];",
+            vec![],
+        )
+        .await;
+    assert_eq!(secure, json!(["https:", true]));
+    assert_eq!(therapist.count("#unencrypted.hidden").await, 1);
     therapist
         .screenshot(shots, "therapist_login_1280x800")
         .await;

@@ -1,5 +1,7 @@
-//! Helpers of the browser test: child processes killed on drop, deadlines on every wait, and
-//! a WebDriver page. (The loopback namespace every DDS process runs in is `loopback_netns`.)
+//! Helpers of the browser test: child processes killed on drop, deadlines on every wait, the
+//! robot's CA trusted the way a tablet trusts it (an NSS database, Chromium's trust store on
+//! Linux), and a WebDriver page. (The loopback namespace every DDS process runs in is
+//! `loopback_netns`.)
 
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value, json};
@@ -91,16 +93,68 @@ pub fn port_open(port: u16) -> bool {
     std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
 }
 
-/// The raw HTTP/1.1 response head to `request` (tests the server without a browser).
-pub fn raw_http(port: u16, request: &str) -> String {
-    use std::io::{Read, Write};
-    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect");
-    s.set_read_timeout(Some(Duration::from_secs(5)))
-        .expect("timeout");
-    s.write_all(request.as_bytes()).expect("write");
-    let mut buf = [0u8; 4096];
-    let n = s.read(&mut buf).unwrap_or(0);
+/// The host name the pages are opened at: Chromium maps it to 127.0.0.1 (it is in the
+/// server certificate, as the robot's own name is).
+pub const ROBOT_HOST: &str = "qtrobot.test";
+
+/// The raw HTTP/1.1 response head to `request`, over TLS to `ROBOT_HOST` trusting only the CA
+/// of `ca_dir` (tests the server without a browser).
+pub async fn raw_https(port: u16, ca_dir: &Path, request: &str) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut roots = rustls::RootCertStore::empty();
+    roots
+        .add(tablet_bridge::certificates::read_ca(ca_dir).expect("the CA"))
+        .expect("a root");
+    let config = rustls::ClientConfig::builder_with_provider(tablet_bridge::tls::provider())
+        .with_safe_default_protocol_versions()
+        .expect("versions")
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(std::sync::Arc::new(config));
+    let tcp = tokio::net::TcpStream::connect(("127.0.0.1", port))
+        .await
+        .expect("connect");
+    let name = rustls::pki_types::ServerName::try_from(ROBOT_HOST).expect("name");
+    let mut s = connector.connect(name, tcp).await.expect("TLS handshake");
+    s.write_all(request.as_bytes()).await.expect("write");
+    let mut buf = vec![0u8; 4096];
+    let read = tokio::time::timeout(Duration::from_secs(5), s.read(&mut buf)).await;
+    let n = read.ok().and_then(Result::ok).unwrap_or(0);
     String::from_utf8_lossy(&buf[..n]).into_owned()
+}
+
+/// A home directory whose NSS database (`.pki/nssdb`, where Chromium on Linux keeps the
+/// certificates its user installed) trusts the CA in `ca_file` for TLS servers, as a tablet
+/// does once the robot's CA is installed on it. Made with NSS's own `certutil`.
+pub fn home_trusting(home: &Path, ca_file: &Path) {
+    let db = home.join(".pki/nssdb");
+    std::fs::create_dir_all(&db).expect("nssdb dir");
+    let db = format!("sql:{}", db.display());
+    let run = |args: &[&str]| {
+        let out = Command::new("certutil")
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .expect("certutil runs");
+        assert!(
+            out.status.success(),
+            "certutil {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    run(&["-N", "-d", &db, "--empty-password"]);
+    let ca = ca_file.display().to_string();
+    run(&[
+        "-A",
+        "-d",
+        &db,
+        "-n",
+        "QTrobot therapy CA",
+        "-t",
+        "C,,",
+        "-i",
+        &ca,
+    ]);
 }
 
 /// One browser window (one WebDriver session, its own fresh profile) showing one page.
@@ -130,6 +184,7 @@ impl Page {
         ];
         let mut args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
         args.push(format!("--user-data-dir={}", profile.display()));
+        args.push(format!("--host-resolver-rules=MAP {ROBOT_HOST} 127.0.0.1"));
         args.push(format!("--window-size={},{}", size.0, size.1));
         let mut caps = serde_json::Map::new();
         caps.insert("browserName".into(), json!("chrome"));
@@ -250,7 +305,8 @@ impl Page {
             const got = [];
             let finished = false;
             const finish = () => { if (!finished) { finished = true; done(got); } };
-            const ws = new WebSocket("ws://" + location.host + path);
+            const scheme = location.protocol === "https:" ? "wss://" : "ws://";
+            const ws = new WebSocket(scheme + location.host + path);
             ws.onmessage = (e) => { try { got.push(JSON.parse(e.data)); } catch (x) { got.push(e.data); } };
             ws.onclose = (e) => { got.push({type: "closed", code: e.code, reason: e.reason}); finish(); };
             ws.onopen = () => {
