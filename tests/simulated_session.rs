@@ -140,6 +140,31 @@ fn a_whole_simulated_session_over_dds() {
         decisions.iter().all(|d| d.step != 1 || d.feedback == 0),
         "no feedback on the first sequence"
     );
+    // Algorithm 1's order: each decision was made by a table that had learned every earlier
+    // result of the session (its update count, in model_used, one more per step). The main
+    // job's bag once showed decisions 5-8 made before the result before them was learned.
+    let updates = |d: &Decision| -> Option<u64> {
+        let tail = d.model_used.rsplit_once(", ")?.1;
+        tail.strip_suffix(" updates)")?.parse().ok()
+    };
+    let ours: Vec<&Decision> = decisions
+        .iter()
+        .filter(|d| &d.session_id == session)
+        .collect();
+    let first = ours
+        .iter()
+        .find(|d| d.step == 1)
+        .and_then(|d| updates(d))
+        .expect("step 1's decision names its update count");
+    for d in &ours {
+        assert_eq!(
+            updates(d),
+            Some(first + u64::from(d.step) - 1),
+            "step {} decided by a table with {:?} updates (step 1: {first}): {context}",
+            d.step,
+            d.model_used
+        );
+    }
 
     // The report the main job writes next to the bag.
     let report = std::process::Command::new(workspace_bin("session_report"))

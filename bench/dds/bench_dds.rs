@@ -130,6 +130,7 @@ fn decide_request(counter: u64) -> DecideActionRequest {
             previous_score: 0,
         },
         step: 1,
+        after_sequence: 0,
     }
 }
 

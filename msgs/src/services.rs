@@ -94,6 +94,7 @@ ros_message! {
         pub user_model_cluster: i32,
         pub state: BehaviourState,
         pub step: u8,
+        pub after_sequence: u8,
     }
 }
 

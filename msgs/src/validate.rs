@@ -505,6 +505,15 @@ impl Validate for DecideActionRequest {
         check_id(M, "user_id", &self.user_id, false)?;
         check_range(M, "user_model_cluster", self.user_model_cluster, -1, 63)?;
         check_range(M, "step", self.step, 1, 10)?;
+        if self.after_sequence >= self.step {
+            return fail(
+                M,
+                format!(
+                    "after_sequence {} is not before step {}",
+                    self.after_sequence, self.step
+                ),
+            );
+        }
         let state = self
             .state
             .to_state()

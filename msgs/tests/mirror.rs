@@ -518,6 +518,7 @@ fn every_type_round_trips_through_cdr_exactly() {
         user_model_cluster: 0,
         state: state(),
         step: 2,
+        after_sequence: 1,
     });
     round_trip(DecideActionResponse {
         ok: true,

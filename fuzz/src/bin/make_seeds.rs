@@ -458,6 +458,7 @@ fn messages(dir: &Path) -> anyhow::Result<()> {
         user_model_cluster: 0,
         state,
         step: 2,
+        after_sequence: 1,
     };
     message(dir, "DecideAction_Request", "1", &decide)?;
     let decided = DecideActionResponse {

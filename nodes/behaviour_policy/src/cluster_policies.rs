@@ -249,6 +249,17 @@ impl ClusterPolicies {
         }
     }
 
+    /// The highest sequence of `request`'s session its cluster's table has learned from (kept
+    /// in the table's file, so it survives a restart); `None` if none, or the cluster is not
+    /// served.
+    pub fn last_learned(&self, request: &DecideActionRequest) -> Option<u8> {
+        let k = self.cluster(request.user_model_cluster).ok()?;
+        match self.tables().get(k)? {
+            OwnedTable::Ready(p) => p.last_learned(&request.session_id),
+            OwnedTable::Unavailable { .. } => None,
+        }
+    }
+
     /// The Decision message answering `request`, stamped `header`.
     pub fn decide(
         &mut self,

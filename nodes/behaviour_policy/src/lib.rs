@@ -10,6 +10,7 @@ pub mod cluster_policies;
 pub mod evaluation_plot;
 pub mod experiments;
 pub mod grid;
+pub mod learn_first;
 pub mod learning;
 pub mod messages;
 pub mod off_policy;

@@ -24,6 +24,9 @@ pub struct BehaviourPolicyParams {
     pub temperature_decay: f64,
     pub beta: f64,
     pub lambda: f64,
+    /// How long a decision request waits for the result it follows (`after_sequence`) before
+    /// it is refused, in seconds.
+    pub result_wait_s: f64,
 }
 
 impl Default for BehaviourPolicyParams {
@@ -47,6 +50,7 @@ impl Default for BehaviourPolicyParams {
             temperature_decay: l.temperature.decay_per_visit,
             beta: l.beta,
             lambda: l.lambda,
+            result_wait_s: 1.0,
         }
     }
 }
@@ -104,6 +108,17 @@ impl BehaviourPolicyParams {
     pub fn seed(&self) -> u64 {
         // Negative seeds (YAML integers are signed) are as good as any: keep the bits.
         self.seed as u64
+    }
+
+    /// The longest wait for a request's result, in ns: under the game manager's deadline for
+    /// the whole call (2 s), so a refusal reaches it in time.
+    pub fn result_wait_ns(&self) -> Result<i64, ParamError> {
+        check(
+            "result_wait_s",
+            self.result_wait_s.is_finite() && (0.0..=30.0).contains(&self.result_wait_s),
+            || format!("{} is not in [0, 30] s", self.result_wait_s),
+        )?;
+        Ok((self.result_wait_s * 1e9).round() as i64)
     }
 
     pub fn pretraining(&self) -> Result<(usize, usize), ParamError> {

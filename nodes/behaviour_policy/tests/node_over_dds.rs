@@ -61,6 +61,161 @@ fn with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds(
     );
 }
 
+#[test]
+fn a_decision_waits_for_the_result_it_follows_over_dds() {
+    let Some(stdout) = loopback_netns::test_inside_namespace(
+        "a_decision_waits_for_the_result_it_follows_over_dds",
+        IN_NAMESPACE,
+        Duration::from_secs(120),
+        ordering_inside_the_namespace,
+    ) else {
+        return;
+    };
+    assert!(
+        stdout.contains(
+            "over DDS, in order: the step-2 call sent 600 ms before result 1 was answered after \
+             it, from the table that had learned it (1 updates), as the in-process policy; a \
+             call whose result never came refused after result_wait_s"
+        ),
+        "{stdout}"
+    );
+}
+
+/// Algorithm 1's order (issue 33, item 1): the game manager's request for step 2 can reach the
+/// policy before sequence 1's result (a service and a topic). The call is sent first and the
+/// result 600 ms later: the answer must come after the result and be the decision of a table
+/// that has learned it. Before `after_sequence` and the node's wait, it was answered at once
+/// from the table without the result (0 updates).
+fn ordering_inside_the_namespace() {
+    use node_shell::{NoParameters, NodeShell};
+    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let q_tables = dir.path().join("q_tables");
+    std::fs::create_dir_all(&q_tables).expect("mkdir");
+    cluster_0_file()
+        .save(&q_tables.join("cluster_0.json"))
+        .expect("writes cluster 0");
+    let (mut node, probe_params, log) =
+        start_node(dir.path(), &q_tables, "    result_wait_s: 1.5\n");
+    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+
+    // The in-process policy, learning first.
+    let params = BehaviourPolicyParams::default();
+    let expected_dir = dir.path().join("expected");
+    std::fs::create_dir_all(&expected_dir).expect("mkdir");
+    cluster_0_file()
+        .save(&expected_dir.join("cluster_0.json"))
+        .expect("writes");
+    let (mut expected, _) = PersistentPolicy::open(
+        &expected_dir,
+        QTableOwner::Cluster(0),
+        params.learning().expect("learning"),
+        Mode::Exploit,
+        params.seed(),
+        || Err("the file is there".into()),
+    )
+    .expect("opens the copy");
+    let first = good_result("order", 0);
+    expected
+        .learn_sequence("order", 1, &transition(&first).expect("valid"))
+        .expect("learns");
+    let next_state = State::new(2, 0, 2).expect("state after a2 solved");
+    let expected_decision = expected.decide(next_state, 2).expect("decides");
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    runtime.block_on(async {
+        let (mut shell, NoParameters {}) =
+            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
+                .expect("probe node");
+        let decide = std::sync::Arc::new(shell.client(DECIDE_ACTION).expect("client"));
+        let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
+        assert!(
+            shell.wait_for_service(&decide, Duration::from_secs(30)).await,
+            "no DecideAction server:\n{}",
+            node_log()
+        );
+        assert!(
+            results.wait_for_subscribers(&shell, Duration::from_secs(30)).await,
+            "the node does not subscribe to results"
+        );
+        let step_two = DecideActionRequest {
+            session_id: "order".into(),
+            after_sequence: 1,
+            ..request(0, 2, BehaviourState::from_state(next_state))
+        };
+        let sent = Instant::now();
+        let call = {
+            let decide = decide.clone();
+            tokio::spawn(async move { decide.call(step_two, Duration::from_secs(10)).await })
+        };
+        tokio::time::sleep(Duration::from_millis(600)).await;
+        let result_sent = sent.elapsed();
+        assert!(results.send(first.clone()), "publishes");
+        let r = call.await.expect("joins").expect("answers");
+        let answered = sent.elapsed();
+        assert!(r.ok, "{}: {}", r.error, node_log());
+        assert!(
+            answered >= result_sent,
+            "answered {answered:?} after the call, before the result ({result_sent:?})"
+        );
+        let d = &r.decision;
+        assert!(
+            d.model_used.ends_with("cluster_0.json, 1 updates)"),
+            "decided before learning: {}",
+            d.model_used
+        );
+        assert_eq!(
+            (d.action, d.q_values.clone(), d.probabilities.clone()),
+            (
+                expected_decision.action.index() as u8,
+                expected_decision.q_values.to_vec(),
+                expected_decision.probabilities.to_vec()
+            )
+        );
+        // A call whose result never comes: refused after result_wait_s, naming it.
+        let lost = DecideActionRequest {
+            session_id: "order".into(),
+            after_sequence: 2,
+            ..request(0, 3, BehaviourState::from_state(next_state))
+        };
+        let asked = Instant::now();
+        let r = decide
+            .call(lost, Duration::from_secs(10))
+            .await
+            .expect("answers");
+        assert!(!r.ok);
+        assert!(
+            r.error.contains("the result of sequence 2 of session \"order\" has not reached the policy within 1.5 s"),
+            "{}",
+            r.error
+        );
+        assert!(asked.elapsed() >= Duration::from_millis(1400), "{:?}", asked.elapsed());
+        println!(
+            "ordering: result sent {} ms after the call, answered at {} ms",
+            result_sent.as_millis(),
+            answered.as_millis()
+        );
+        drop(results);
+        shell.stop().await;
+    });
+    let status = node.interrupt(Duration::from_secs(20));
+    let text = node_log();
+    assert!(status.success(), "the node exited with {status}:\n{text}");
+    assert!(
+        text.contains("2 held, 1 answered once it was learned, 1 refused after result_wait_s"),
+        "{text}"
+    );
+    println!(
+        "over DDS, in order: the step-2 call sent 600 ms before result 1 was answered after it, \
+         from the table that had learned it (1 updates), as the in-process policy; a call whose \
+         result never came refused after result_wait_s"
+    );
+}
+
 /// The node process; killed if the test ends early, so no node outlives a failed run.
 struct NodeProcess(Child);
 
@@ -161,6 +316,8 @@ fn request(cluster: i32, step: u8, state: BehaviourState) -> DecideActionRequest
         user_model_cluster: cluster,
         state,
         step,
+        // These calls test the service alone: no result precedes them.
+        after_sequence: 0,
     }
 }
 

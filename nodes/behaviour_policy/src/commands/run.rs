@@ -1,15 +1,17 @@
 //! `behaviour_policy run`: the decision node over DDS. Answers DecideAction with an explained
 //! Decision (also published), learns from every SequenceResult and saves that cluster's
-//! Q-table at once. A cluster whose Q-table file is refused at start-up is unavailable (its
+//! Q-table at once; a request that comes before the result it follows waits for it
+//! (`LearnFirst`). A cluster whose Q-table file is refused at start-up is unavailable (its
 //! calls are answered ok = false naming the file) while the others serve. All logic is in
 //! `ClusterPolicies`/`PersistentPolicy`/`PolicyCore`; this only moves messages.
 
 use anyhow::Context;
 use behaviour_policy::experiments::{EpochScheme, RunSpec, best_run, train_run};
+use behaviour_policy::learn_first::LearnFirst;
 use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
 use behaviour_policy::{BehaviourPolicyParams, ClusterPolicies, Learning, Mode, QTable};
 use node_shell::instance_lock::InstanceLock;
-use node_shell::{NodeShell, ShellOptions, header_now};
+use node_shell::{NodeShell, ShellOptions, header_now, now_nanos};
 use qt_therapy_msgs::DecideActionResponse;
 use qt_therapy_msgs::topics::{BEHAVIOUR_POLICY_NODE, DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
 use sequence_game::UserModelTable;
@@ -72,6 +74,7 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
         .with_context(|| format!("user_model_file in {}", params_file.display()))?;
     // Parameter errors stop the node; a bad Q-table file only makes its cluster unavailable.
     let pretraining = params.pretraining().with_context(in_file)?;
+    let result_wait_ns = params.result_wait_ns().with_context(in_file)?;
     let models = set.tables();
     let mut policies = ClusterPolicies::open(
         Path::new(&params.q_table_dir),
@@ -92,23 +95,58 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
         let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
         let decisions = shell.publisher(DECISION)?;
         let drops = shell.drops();
+        let mut gate: LearnFirst<node_shell::ServiceCall<qt_therapy_msgs::DecideAction>> =
+            LearnFirst::new(result_wait_ns);
         let stop = shell.shutdown_signal();
         tokio::pin!(stop);
+        let decide = |policies: &mut ClusterPolicies,
+                      req: &qt_therapy_msgs::DecideActionRequest| {
+            match policies.decide(req, header_now()) {
+                Ok(d) => {
+                    decisions.send(d.clone());
+                    DecideActionResponse {
+                        ok: true,
+                        error: String::new(),
+                        decision: d,
+                    }
+                }
+                Err(e) => {
+                    tracing::warn!(session = %req.session_id, "refused a decision: {e}");
+                    DecideActionResponse {
+                        ok: false,
+                        error: e.to_string(),
+                        ..Default::default()
+                    }
+                }
+            }
+        };
         loop {
+            let wait = gate
+                .next_deadline_ns()
+                .map(|d| std::time::Duration::from_nanos((d - now_nanos()).max(0) as u64));
             tokio::select! {
                 _ = &mut stop => break,
+                _ = tokio::time::sleep(wait.unwrap_or_default()), if wait.is_some() => {
+                    for e in gate.expired(now_nanos()) {
+                        tracing::warn!(session = %e.request.session_id, step = e.request.step,
+                            "refused a decision: {}", e.reason);
+                        e.call.respond(DecideActionResponse {
+                            ok: false,
+                            error: e.reason,
+                            ..Default::default()
+                        });
+                    }
+                }
                 Some(call) = calls.recv() => {
-                    let req = &call.request;
-                    let response = match policies.decide(req, header_now()) {
-                        Ok(d) => {
-                            decisions.send(d.clone());
-                            DecideActionResponse { ok: true, error: String::new(), decision: d }
-                        }
-                        Err(e) => {
-                            tracing::warn!(session = %req.session_id, "refused a decision: {e}");
-                            DecideActionResponse { ok: false, error: e.to_string(), ..Default::default() }
-                        }
+                    let learned = policies.last_learned(&call.request);
+                    let request = call.request.clone();
+                    let (session, after) = (request.session_id.clone(), request.after_sequence);
+                    let Some((call, req)) = gate.request(call, request, learned, now_nanos()) else {
+                        tracing::info!(session = %session, "a decision request came before the \
+                            result of sequence {after} it follows: held until it is learned");
+                        continue;
                     };
+                    let response = decide(&mut policies, &req);
                     call.respond(response);
                 }
                 Some(result) = results.recv() => {
@@ -123,8 +161,23 @@ pub async fn run(options: ShellOptions) -> anyhow::Result<()> {
                             drops.record(SEQUENCE_RESULT.name, &format!("not learned from: {e}"));
                         }
                     }
+                    // Learned (or refused) first, then the decisions that waited for it.
+                    for (call, req) in gate.result_seen(&result.session_id, result.sequence_index) {
+                        let response = decide(&mut policies, &req);
+                        call.respond(response);
+                    }
                 }
             }
+        }
+        let c = gate.counts();
+        if c.held > 0 {
+            tracing::info!(
+                "decision requests that came before their result: {} held, {} answered once it \
+                 was learned, {} refused after result_wait_s",
+                c.held,
+                c.released,
+                c.refused
+            );
         }
     }
     shell.stop().await;

@@ -34,6 +34,9 @@ impl GameManager {
             user_model_cluster: s.cluster,
             state: BehaviourState::from_state(s.state),
             step: s.index,
+            // Algorithm 1 learns a result before the next choice: the policy waits for this
+            // one (results travel on a topic, requests on a service: either may come first).
+            after_sequence: s.results.last().map_or(0, |r| r.sequence_index),
         };
         let deadline_ns = now + (self.params.policy_deadline_s * 1e9).round() as i64;
         self.current.request_id = Some(request_id);

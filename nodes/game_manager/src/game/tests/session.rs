@@ -77,6 +77,19 @@ fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
     }
     let outcomes: Vec<i8> = results.iter().map(|r| r.outcome).collect();
     assert_eq!(outcomes, vec![1, 1, -1, 1, -1, 1, -1, 1, 1, 1]);
+    // Each request names the result it follows (the policy learns it first), published
+    // before the request went out.
+    let mut published = 0;
+    for o in h.outputs() {
+        match o {
+            Output::Result(r) => published = r.sequence_index,
+            Output::Decide { request, .. } => {
+                assert_eq!(request.after_sequence, published, "step {}", request.step);
+                assert_eq!(request.after_sequence, request.step - 1);
+            }
+            _ => {}
+        }
+    }
     assert!(results[4].timed_out && results[4].answer.is_empty());
     assert_eq!(results[4].response_time, 60.0);
     // The rule policy encourages after a failure: feedback 1 on sequences 4, 6 and 8.
