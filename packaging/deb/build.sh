@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the qt-therapy Debian package from this workspace with dpkg-deb (Debian's own tool,
-# kept with dpkg itself): the suite's eleven programs, its parameters as conffiles in
+# kept with dpkg itself): the suite's twelve programs, its parameters as conffiles in
 # /etc/qt-therapy, models and launch files in /usr/share/qt-therapy, the systemd unit.
 #   bash packaging/deb/build.sh [--revision N] [--profile release|dev] [--out DIR]
 # Prints the path of the .deb. The layout and why: docs/install.md.
@@ -38,6 +38,7 @@ programs=(
   "behaviour_policy behaviour_policy behaviour-policy"
   "game_manager game_manager game-manager"
   "tablet_bridge tablet_bridge tablet-bridge"
+  "tablet_bridge tablet_tls tls"
   "openface_bridge openface_bridge openface-bridge"
   "simulated_child simulated_child simulated-child"
   "therapist_console therapist therapist"
@@ -48,7 +49,7 @@ programs=(
 packages=()
 for p in "${programs[@]}"; do
   read -r crate _ _ <<<"$p"
-  packages+=(-p "$crate")
+  [[ " ${packages[*]} " == *" $crate "* ]] || packages+=(-p "$crate")
 done
 cargo build --profile "$profile" --bins "${packages[@]}"
 target=${CARGO_TARGET_DIR:-target}
@@ -89,17 +90,23 @@ for f in params/*.yaml; do
     -e 's#sessions_dir: "sessions"#sessions_dir: "/var/lib/qt-therapy/sessions"#' \
     "$f" >"$root/etc/qt-therapy/$(basename "$f")"
 done
-# The tablets reach the bridge over the robot's network; the PIN comes from
-# /etc/qt-therapy/environment and has no default.
+# The tablets reach the bridge over the robot's network, over HTTPS with the certificate the
+# postinst makes in /etc/qt-therapy/tls; the PIN comes from /etc/qt-therapy/environment and
+# has no default.
 sed -i -e 's#http_bind: "127.0.0.1:8080"#http_bind: "0.0.0.0:8080"#' \
+  -e 's#tls_cert_file: ""#tls_cert_file: "/etc/qt-therapy/tls/server.crt"#' \
+  -e 's#tls_key_file: ""#tls_key_file: "/etc/qt-therapy/tls/server.key"#' \
   -e 's#^\(\s*\)pin: "1234"#\1pin: ""  \# set QT_TABLET_PIN in /etc/qt-therapy/environment#' \
   "$root/etc/qt-therapy/tablet_bridge.yaml"
+grep -q 'tls_key_file: "/etc/qt-therapy/tls/server.key"' "$root/etc/qt-therapy/tablet_bridge.yaml" ||
+  { echo "build.sh: the installed tablet_bridge.yaml names no certificate" >&2; exit 1; }
 install -m 0640 packaging/deb/environment "$root/etc/qt-therapy/environment"
 if grep -nE '"(nodes|out|params|sessions)/|"1234"' "$root"/etc/qt-therapy/*.yaml; then
   echo "build.sh: a parameter above still names a workspace path or the example PIN" >&2
   exit 1
 fi
-for model in $(sed -n 's/.*_file: "\(\/[^"]*\)".*/\1/p' "$root"/etc/qt-therapy/*.yaml | sort -u); do
+# (The certificate is made at install, not packaged.)
+for model in $(sed -n 's/.*_file: "\(\/[^"]*\)".*/\1/p' "$root"/etc/qt-therapy/*.yaml | grep -v '^/etc/qt-therapy/tls/' | sort -u); do
   [ -f "$root$model" ] || { echo "build.sh: a parameter names $model, which is not packaged" >&2; exit 1; }
 done
 

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The qt-therapy package, end to end, on this Debian machine (as root; it installs, upgrades,
-# removes and purges the package here): its file list and conffiles, the unit, one simulated
-# session run by the installed start script as the qt-therapy user, the refusal without a PIN,
-# an upgrade and a removal that keep /var/lib/qt-therapy, and a purge that deletes it.
+# removes and purges the package here): its file list and conffiles, the unit, the tablets'
+# certificate made at install, one simulated session run by the installed start script as the
+# qt-therapy user (its pages over HTTPS), the refusal without a PIN, an upgrade and a removal
+# that keep /var/lib/qt-therapy and the certificate, and a purge that deletes them.
 #   bash tests/package/check.sh        QT_PACKAGE_PROFILE=dev reuses the debug build
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -54,7 +55,7 @@ for f in /usr/lib/qt-therapy/start /lib/systemd/system/qt-therapy.service /etc/q
   grep -qx "$f" "$work/files" || fail "$f is not in the package"
 done
 for p in launch game-manager behaviour-policy user-model engagement-classifier tablet-bridge \
-  openface-bridge simulated-child therapist bag report; do
+  openface-bridge simulated-child therapist bag report tls; do
   grep -qx "/usr/bin/qt-therapy-$p" "$work/files" || fail "/usr/bin/qt-therapy-$p is not in the package"
 done
 for y in params/*.yaml; do
@@ -79,6 +80,25 @@ getent passwd qt-therapy >/dev/null || fail "no qt-therapy user"
   fail "environment: $(stat -c '%U:%G %a' /etc/qt-therapy/environment)"
 [ -L /etc/systemd/system/multi-user.target.wants/qt-therapy.service ] || fail "the service is not enabled"
 qt-therapy-launch --help >/dev/null || fail "qt-therapy-launch does not run"
+
+step "the tablets' certificate, made at install"
+tls=/etc/qt-therapy/tls
+for f in ca.crt ca.key server.crt server.key; do
+  [ -s "$tls/$f" ] || fail "no $tls/$f after install"
+done
+[ "$(stat -c '%U:%G %a' "$tls/ca.key")" = "root:root 600" ] || fail "ca.key: $(stat -c '%U:%G %a' "$tls/ca.key")"
+[ "$(stat -c '%U:%G %a' "$tls/server.key")" = "qt-therapy:qt-therapy 600" ] ||
+  fail "server.key: $(stat -c '%U:%G %a' "$tls/server.key")"
+fingerprint=$(qt-therapy-tls fingerprint)
+grep -q "CA SHA-256 fingerprint: $fingerprint" "$work/install.out" || fail "the install did not print the CA's fingerprint"
+qt-therapy-tls export-ca "$work/tablet-ca.crt" >/dev/null && cmp -s "$work/tablet-ca.crt" "$tls/ca.crt" ||
+  fail "qt-therapy-tls export-ca did not write the CA"
+grep -q "tls_key_file: \"$tls/server.key\"" /etc/qt-therapy/tablet_bridge.yaml || fail "tablet_bridge.yaml names no certificate"
+# The service user loads the certificate and key the bridge is to serve with, and cannot read the CA's key.
+runuser -u qt-therapy -- env QT_PARAMS_DIR=/etc/qt-therapy QT_TABLET_PIN=8642 RUST_BACKTRACE=0 \
+  /usr/lib/qt-therapy/bin/tablet_bridge --check >"$work/check.out" 2>&1 || { cat "$work/check.out"; fail "tablet_bridge --check as qt-therapy"; }
+! runuser -u qt-therapy -- cat "$tls/ca.key" >/dev/null 2>&1 || fail "the service user can read the CA's key"
+(cd "$tls" && sha256sum ca.crt ca.key server.crt server.key) >"$work/tls.before"
 
 step "systemd-analyze verify"
 systemd-analyze verify /lib/systemd/system/qt-therapy.service 2>&1 | tee "$work/verify.out"
@@ -124,6 +144,8 @@ run=$(ls -d "$state"/sessions/*/ | head -n 1)
 summary=$(ls "$run"/*.summary.json 2>/dev/null | head -n 1)
 [ -n "$summary" ] || fail "no session summary in $run"
 grep -q '"sequences_played": 10,' "$summary" || fail "the session did not play 10 sequences: $(cat "$summary")"
+grep -q "serving the tablet pages over HTTPS" "$run/logs/tablet_bridge.log" ||
+  fail "the installed bridge did not serve over HTTPS: $(tail -n 5 "$run/logs/tablet_bridge.log")"
 ls "$run"/q_tables/cluster_*.json >/dev/null || fail "no Q-table learned in $run/q_tables"
 (cd /tmp && qt-therapy-report) >"$work/report.out" || fail "qt-therapy-report"
 grep -q "$run" "$work/report.out" && [ -s "$run/report.html" ] || fail "the report of the last run: $(cat "$work/report.out")"
@@ -141,6 +163,9 @@ dpkg-query -W -f '${Version}\n' qt-therapy | grep -q -- '-2$' || fail "revision 
 sum_state | diff "$work/state.before" - || fail "the upgrade changed $state"
 grep -q "changed on this robot" /etc/qt-therapy/game_manager.yaml || fail "the upgrade dropped a local change"
 grep -q '^QT_TABLET_PIN=8642' /etc/qt-therapy/environment || fail "the upgrade dropped the PIN"
+grep -q "kept the CA" "$work/upgrade.out" || fail "the upgrade did not say it kept the CA"
+(cd "$tls" && sha256sum ca.crt ca.key server.crt server.key) | diff "$work/tls.before" - ||
+  fail "the upgrade changed the tablets' certificate"
 
 step "remove keeps the state"
 apt-get remove -y -qq qt-therapy >"$work/remove.out" 2>&1 || { cat "$work/remove.out"; fail "apt remove"; }
@@ -148,10 +173,13 @@ grep -q "kept in $state" "$work/remove.out" || fail "the removal did not say the
 [ ! -e /usr/bin/qt-therapy-launch ] || fail "programs left after remove"
 sum_state | diff "$work/state.before" - || fail "the removal changed $state"
 getent passwd qt-therapy >/dev/null || fail "the removal deleted the user"
+(cd "$tls" && sha256sum ca.crt ca.key server.crt server.key) | diff "$work/tls.before" - ||
+  fail "the removal changed the tablets' certificate"
 
 step "purge deletes it, saying so"
 apt-get purge -y -qq qt-therapy >"$work/purge.out" 2>&1 || { cat "$work/purge.out"; fail "apt purge"; }
 grep -q "deleting $state" "$work/purge.out" || fail "the purge did not say what it deletes"
+grep -q "deleting the tablets' certificates" "$work/purge.out" || fail "the purge did not say it deletes the certificates"
 [ ! -e "$state" ] || fail "$state left after purge"
 [ ! -e /etc/qt-therapy ] || fail "/etc/qt-therapy left after purge"
 ! getent passwd qt-therapy >/dev/null || fail "the user left after purge"
