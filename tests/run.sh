@@ -11,6 +11,8 @@ command -v unshare >/dev/null || need_apt+=(util-linux)
 [ -e /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need_apt+=(fonts-dejavu-core)
 command -v chromium >/dev/null || need_apt+=(chromium)
 command -v chromedriver >/dev/null || need_apt+=(chromium-driver)
+# The browser test trusts the robot's test CA in an NSS database (certutil).
+command -v certutil >/dev/null || need_apt+=(libnss3-tools)
 # DDS Security test: the keystore script uses openssl; the secured build links OpenSSL.
 command -v openssl >/dev/null || need_apt+=(openssl)
 [ -e /usr/include/openssl/ssl.h ] || need_apt+=(libssl-dev)
