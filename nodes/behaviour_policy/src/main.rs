@@ -25,13 +25,15 @@ enum Command {
     Train(commands::train::Args),
     /// Print a Q-table file: per state its Q-values, greedy action, visits, temperature.
     ShowQTable(commands::show_q_table::Args),
-    /// Judge a Q-table's policy on recorded sessions (off-policy importance sampling).
+    /// Judge a Q-table's policy on recorded sessions (off-policy importance sampling), or
+    /// refuse where the sessions cannot tell.
     Evaluate(commands::evaluate::Args),
     /// Check `evaluate`'s estimators where the truth is known: sessions logged against a user
     /// model, the judged policy's exact value beside the estimates, over many seeds.
     EvaluateInSimulation(commands::evaluate::SimulationArgs),
     /// Per-child adaptation: leave one study child out, compare the cluster's policy, a
-    /// per-user table started from it and a table learned from scratch on the child.
+    /// per-user table started from it, a table learned from scratch on the child and the
+    /// optimal policy for the child's model, on the same draws, child by child.
     PerChild(commands::per_child::Args),
     /// Run the decision node over DDS.
     Run {

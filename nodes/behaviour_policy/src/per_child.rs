@@ -2,15 +2,21 @@
 //! child the user models are fitted without them, the child is put in the nearest cluster, and
 //! the child's own fitted model stands in for the child; then, over a run of simulated sessions
 //! against it, the cluster's policy as it stands is compared with a per-user table started
-//! from it (the node's `per_user_q_tables`) and a table learned on the child from scratch.
-//! A policy trained offline on the child's own model is the ceiling none of them can know.
+//! from it (the node's `per_user_q_tables`), a table learned on the child from scratch, and
+//! the optimal policy for the child's own model (which no clinic has: its value is the most
+//! any policy can expect against that model). Every policy meets the same simulated child:
+//! session k of repetition s of a child draws the same numbers whatever the policy
+//! (`simulation::SessionDraws`, common random numbers), and the policies are compared child
+//! by child (`stats::PairedComparison`).
 
 use crate::experiments::{EpochScheme, RunSpec, best_run, train_run};
 use crate::grid::splitmix64;
 use crate::learning::{Learning, Mode, QTable};
+use crate::mdp::{ExactValue, Objective, optimal_policy, play_session, session_metrics};
 use crate::simulation::{
-    SessionMetrics, SessionSettings, SimulatedRun, SimulatedUser, run_session,
+    SessionDraws, SessionMetrics, SessionSettings, SimulatedRun, SimulatedUser, run_session_with,
 };
+use crate::stats::{Interval, PairedComparison, mean, t_interval};
 use rayon::prelude::*;
 use sequence_game::UserModelTable;
 use serde::Serialize;
@@ -26,21 +32,37 @@ pub enum Arm {
     PerUser,
     /// A new table learned on the child alone: softmax with the per-state temperature.
     Scratch,
-    /// Pretrained on the child's own model in simulation, greedy: what a policy could reach
-    /// if it knew the child in advance (a ceiling, not a policy a clinic can have).
-    ChildModel,
+    /// The optimal policy for the child's own model (backward induction, best expected
+    /// return): what a policy could do knowing the child's model in advance, which no clinic
+    /// does. Its exact expected return is the most any policy can expect per session against
+    /// that model; its score is not a bound on score (the return also pays for engagement).
+    Optimal,
 }
 
 impl Arm {
-    pub const ALL: [Arm; 4] = [Arm::Cluster, Arm::PerUser, Arm::Scratch, Arm::ChildModel];
+    pub const ALL: [Arm; 4] = [Arm::Cluster, Arm::PerUser, Arm::Scratch, Arm::Optimal];
 
     pub fn name(self) -> &'static str {
         match self {
             Arm::Cluster => "cluster policy",
             Arm::PerUser => "per-user table from the cluster's",
             Arm::Scratch => "from scratch on the child",
-            Arm::ChildModel => "trained on the child's model (ceiling)",
+            Arm::Optimal => "optimal for the child's model",
         }
+    }
+
+    /// Short name for files (CSV).
+    pub fn key(self) -> &'static str {
+        match self {
+            Arm::Cluster => "cluster",
+            Arm::PerUser => "per_user",
+            Arm::Scratch => "scratch",
+            Arm::Optimal => "optimal",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
     }
 }
 
@@ -50,13 +72,13 @@ pub struct StudySpec {
     /// User models fitted without the child (clusters, seeds, kernel).
     pub fit: FitOptions,
     pub learning: Learning,
-    /// Pretraining of the cluster's (and the ceiling's) policy, as the node pretrains: `runs`
-    /// runs of `epochs` x 100 sessions, the best by its last epoch's return kept.
+    /// Pretraining of the cluster's policy, as the node pretrains: `runs` runs of `epochs` x
+    /// 100 sessions, the best by its last epoch's return kept.
     pub pretrain_epochs: usize,
     pub pretrain_runs: usize,
     /// Sessions each child plays with each policy.
     pub sessions: usize,
-    /// Independent repetitions (random streams) per child and policy.
+    /// Repetitions per child: each its own random streams, the same for every policy.
     pub seeds: usize,
     pub seed: u64,
 }
@@ -140,12 +162,31 @@ fn pretrain(
 /// Per session of the run, the metrics of one child, policy and seed.
 pub type SessionRun = Vec<SessionMetrics>;
 
-/// What one child got with each policy: `[arm][seed][session]`.
+/// What the child's own model allows, exactly (backward induction, no sampling).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Bounds {
+    /// The optimal policy's value: its expected return is the most any policy can expect.
+    pub optimal: ExactValue,
+    /// The most any policy can expect to score (the policy that maximises the score).
+    pub best_score: f64,
+}
+
+/// What one child got with each policy: `runs[arm][seed][session]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChildResult {
     pub user: String,
     pub cluster: usize,
     pub runs: Vec<Vec<SessionRun>>,
+    pub bounds: Bounds,
+}
+
+/// The random numbers of session `session` of repetition `seed` of child `index`: the same
+/// for every policy.
+fn session_draws(spec: &StudySpec, index: usize, seed: usize, session: usize) -> SessionDraws {
+    SessionDraws::new(seed_of(
+        spec.seed,
+        &[index as u64, 2, seed as u64, session as u64],
+    ))
 }
 
 /// Plays `spec.sessions` sessions per policy and seed against the child's own model.
@@ -161,55 +202,57 @@ pub fn run_child(case: &ChildCase, index: usize, spec: &StudySpec) -> ChildResul
         &live,
         seed_of(spec.seed, &[index as u64, 0]),
     );
-    let ceiling_table = pretrain(
-        &case.child_model,
-        spec,
-        &live,
-        seed_of(spec.seed, &[index as u64, 1]),
-    );
+    let optimal = optimal_policy(&case.child_model, &spec.learning, Objective::Return);
+    let bounds = Bounds {
+        optimal: optimal.value,
+        best_score: optimal_policy(&case.child_model, &spec.learning, Objective::Score)
+            .value
+            .score,
+    };
     let child = SimulatedUser::new(&case.child_model, &spec.learning);
     let frozen = Learning {
         alpha: 0.0,
         ..spec.learning
     };
+    let greedy = |learning| SessionSettings {
+        learning,
+        mode: Mode::Exploit,
+        ..live
+    };
     let runs = Arm::ALL
         .iter()
-        .enumerate()
-        .map(|(a, arm)| {
-            let (table, settings) = match arm {
-                Arm::Cluster => (
-                    cluster_table.clone(),
-                    SessionSettings {
-                        learning: frozen,
-                        mode: Mode::Exploit,
-                        ..live
-                    },
-                ),
-                Arm::PerUser => (
-                    cluster_table.clone(),
-                    SessionSettings {
-                        mode: Mode::Exploit,
-                        ..live
-                    },
-                ),
-                Arm::Scratch => (QTable::default(), live),
-                Arm::ChildModel => (
-                    ceiling_table.clone(),
-                    SessionSettings {
-                        learning: frozen,
-                        mode: Mode::Exploit,
-                        ..live
-                    },
-                ),
-            };
+        .map(|arm| {
             (0..spec.seeds)
                 .map(|s| {
-                    let seed = seed_of(spec.seed, &[index as u64, 2, a as u64, s as u64]);
-                    let mut run = SimulatedRun::seeded(table.clone(), seed);
-                    // Every learned sequence lowers its state's temperature, as in the node.
-                    (0..spec.sessions)
-                        .map(|_| run_session(&mut run, &child, &settings, true))
-                        .collect()
+                    let draws = (0..spec.sessions).map(|k| session_draws(spec, index, s, k));
+                    let learner = |table: &QTable, settings: SessionSettings| -> SessionRun {
+                        // The run's own stream is never drawn from: `draws` decide.
+                        let mut run = SimulatedRun::seeded(table.clone(), 0);
+                        // Every learned sequence lowers its state's temperature, as in the
+                        // node.
+                        draws
+                            .clone()
+                            .map(|d| run_session_with(&mut run, &child, &settings, true, &d))
+                            .collect()
+                    };
+                    match arm {
+                        Arm::Cluster => learner(&cluster_table, greedy(frozen)),
+                        Arm::PerUser => learner(&cluster_table, greedy(spec.learning)),
+                        Arm::Scratch => learner(&QTable::default(), live),
+                        Arm::Optimal => draws
+                            .clone()
+                            .map(|d| {
+                                let (session, _) =
+                                    play_session(&case.child_model, &optimal, String::new(), |k| {
+                                        (d.action[k], d.answer[k])
+                                    });
+                                SessionMetrics {
+                                    start_value: optimal.value.discounted_return,
+                                    ..session_metrics(&session, &spec.learning)
+                                }
+                            })
+                            .collect(),
+                    }
                 })
                 .collect()
         })
@@ -218,6 +261,7 @@ pub fn run_child(case: &ChildCase, index: usize, spec: &StudySpec) -> ChildResul
         user: case.user.clone(),
         cluster: case.cluster,
         runs,
+        bounds,
     }
 }
 
@@ -266,59 +310,126 @@ impl Metric {
     }
 }
 
-/// Mean and standard deviation over seeds of a per-seed mean.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct MeanStd {
-    pub mean: f64,
-    pub std: f64,
+/// A metric over a range of sessions (0-based, end excluded).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Window {
+    pub metric: Metric,
+    pub sessions: std::ops::Range<usize>,
 }
 
-fn mean_std(values: &[f64]) -> MeanStd {
-    let n = values.len().max(1) as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
-    MeanStd {
-        mean,
-        std: var.sqrt(),
+impl Window {
+    /// "score, sessions 16-20".
+    pub fn describe(&self) -> String {
+        format!(
+            "{}, sessions {}-{}",
+            self.metric.name(),
+            self.sessions.start + 1,
+            self.sessions.end
+        )
+    }
+
+    /// The windows every report shows: score over all sessions and over the last five,
+    /// engagement and return over all.
+    pub fn standard(sessions: usize) -> Vec<Window> {
+        vec![
+            Window {
+                metric: Metric::Score,
+                sessions: 0..sessions,
+            },
+            Window {
+                metric: Metric::Score,
+                sessions: sessions.saturating_sub(5)..sessions,
+            },
+            Window {
+                metric: Metric::Engagement,
+                sessions: 0..sessions,
+            },
+            Window {
+                metric: Metric::Return,
+                sessions: 0..sessions,
+            },
+        ]
     }
 }
 
-/// Per seed, the mean over children (all, or those picked) and over the sessions in
-/// `sessions` of a metric; then mean ± std over seeds.
-pub fn summary(
-    results: &[ChildResult],
-    arm: Arm,
-    metric: Metric,
-    sessions: std::ops::Range<usize>,
-    pick: &dyn Fn(&ChildResult) -> bool,
-) -> MeanStd {
-    let a = Arm::ALL.iter().position(|x| *x == arm).unwrap_or(0);
-    let children: Vec<&ChildResult> = results.iter().filter(|r| pick(r)).collect();
-    let seeds = children.first().map_or(0, |c| c.runs[a].len());
-    let per_seed: Vec<f64> = (0..seeds)
-        .map(|s| {
-            let mut sum = 0.0;
-            let mut n = 0usize;
-            for c in &children {
-                for m in &c.runs[a][s][sessions.clone()] {
-                    sum += metric.of(m);
-                    n += 1;
-                }
-            }
-            sum / n.max(1) as f64
+/// One child's mean of the window's metric with one policy in each seed.
+pub fn per_seed(child: &ChildResult, arm: Arm, window: &Window) -> Vec<f64> {
+    child.runs[arm.index()]
+        .iter()
+        .map(|run| {
+            let values: Vec<f64> = run[window.sessions.clone()]
+                .iter()
+                .map(|m| window.metric.of(m))
+                .collect();
+            mean(&values)
         })
-        .collect();
-    mean_std(&per_seed)
+        .collect()
 }
 
-/// Per session index, mean ± std over seeds of the mean over children.
-pub fn curve(results: &[ChildResult], arm: Arm, metric: Metric) -> Vec<MeanStd> {
+/// One child's mean over seeds (and the window's sessions) with one policy.
+pub fn child_mean(child: &ChildResult, arm: Arm, window: &Window) -> f64 {
+    mean(&per_seed(child, arm, window))
+}
+
+/// The mean over children (each weighing the same) with one policy.
+pub fn mean_over_children(results: &[ChildResult], arm: Arm, window: &Window) -> f64 {
+    let per_child: Vec<f64> = results.iter().map(|c| child_mean(c, arm, window)).collect();
+    mean(&per_child)
+}
+
+/// The comparisons every report makes, first minus second: does adapting to the child help,
+/// does learning from scratch, and how far is the per-user table from the best possible.
+pub const COMPARISONS: [(Arm, Arm); 3] = [
+    (Arm::PerUser, Arm::Cluster),
+    (Arm::Scratch, Arm::Cluster),
+    (Arm::Optimal, Arm::PerUser),
+];
+
+/// `first` − `second`, paired by child (and, within a child, by seed: both played the same
+/// draws): per child the difference with its verdict, and over children the mean with t and
+/// bootstrap intervals (`resamples` drawn from `seed`), the median, and the result without
+/// the most influential child.
+pub fn paired(
+    results: &[ChildResult],
+    first: Arm,
+    second: Arm,
+    window: &Window,
+    resamples: usize,
+    seed: u64,
+) -> PairedComparison {
+    let units: Vec<(String, Vec<f64>)> = results
+        .iter()
+        .map(|c| {
+            let a = per_seed(c, first, window);
+            let b = per_seed(c, second, window);
+            (
+                c.user.clone(),
+                a.iter().zip(&b).map(|(x, y)| x - y).collect(),
+            )
+        })
+        .collect();
+    PairedComparison::of(&units, resamples, seed)
+}
+
+/// Per session index, the mean over children (each child: its mean over seeds) and the 95 %
+/// t interval over children (`None` below two children).
+pub fn curve(results: &[ChildResult], arm: Arm, metric: Metric) -> Vec<(f64, Option<Interval>)> {
     let sessions = results
         .first()
         .and_then(|c| c.runs.first()?.first().map(Vec::len))
         .unwrap_or(0);
     (0..sessions)
-        .map(|k| summary(results, arm, metric, k..k + 1, &|_| true))
+        .map(|k| {
+            let window = Window {
+                metric,
+                sessions: k..k + 1,
+            };
+            let per_child: Vec<f64> = results
+                .iter()
+                .map(|c| child_mean(c, arm, &window))
+                .collect();
+            (mean(&per_child), t_interval(&per_child))
+        })
         .collect()
 }
 

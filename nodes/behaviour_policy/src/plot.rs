@@ -1,6 +1,7 @@
 //! The paper's Figs. 4 and 5 as SVG: per epoch the mean ± std band across runs, one line per
 //! configuration (three rewards and the transfer into that model), one panel per user model;
-//! and the per-child study's curves: per session, one line per policy, one panel per metric.
+//! and the per-child study's curves (per session, one line per policy, one panel per metric)
+//! and paired differences (per child, one panel per comparison).
 
 use crate::experiments::EpochMetrics;
 use crate::grid::Curve;
@@ -51,7 +52,7 @@ type Chart<'a, 'b> = ChartContext<
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 
-/// A mean line over its ± std band, named in the legend; `points` are (x, mean, std).
+/// A mean line over its band, named in the legend; `points` are (x, mean, half-width).
 fn draw_band(
     chart: &mut Chart<'_, '_>,
     points: &[(f64, f64, f64)],
@@ -181,8 +182,8 @@ pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<St
     })
 }
 
-/// The per-child study: per session of the run, the mean over children (± std over seeds) of
-/// each policy, one panel per metric.
+/// The per-child study: per session of the run, the mean over children of each policy with
+/// its 95 % t interval over children (each child: the mean over seeds), one panel per metric.
 pub fn per_child_svg(
     results: &[crate::per_child::ChildResult],
     subtitle: &str,
@@ -190,16 +191,31 @@ pub fn per_child_svg(
     use crate::per_child::{Arm, Metric, curve};
     panels_svg((1500, 480), subtitle, Metric::ALL.len(), |i, panel| {
         let metric = Metric::ALL[i];
-        let curves: Vec<(Arm, Vec<crate::per_child::MeanStd>)> = Arm::ALL
+        // Per policy, (x, mean, half-width of the interval).
+        type Points = Vec<(f64, f64, f64)>;
+        let curves: Vec<(Arm, Points)> = Arm::ALL
             .iter()
-            .map(|&a| (a, curve(results, a, metric)))
+            .map(|&a| {
+                let points = curve(results, a, metric)
+                    .into_iter()
+                    .enumerate()
+                    .map(|(k, (m, interval))| {
+                        (
+                            (k + 1) as f64,
+                            m,
+                            interval.map_or(0.0, |i| 0.5 * (i.high - i.low)),
+                        )
+                    })
+                    .collect();
+                (a, points)
+            })
             .collect();
         let sessions = curves.first().map_or(1, |c| c.1.len()).max(2);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (_, c) in &curves {
-            for m in c {
-                lo = lo.min(m.mean - m.std);
-                hi = hi.max(m.mean + m.std);
+            for &(_, m, h) in c {
+                lo = lo.min(m - h);
+                hi = hi.max(m + h);
             }
         }
         if !(lo.is_finite() && hi.is_finite()) {
@@ -222,15 +238,103 @@ pub fn per_child_svg(
             .light_line_style(WHITE.mix(0.0))
             .draw()
             .map_err(err)?;
-        for (i, (arm, c)) in curves.iter().enumerate() {
-            let points: Vec<(f64, f64, f64)> = c
-                .iter()
-                .enumerate()
-                .map(|(k, m)| ((k + 1) as f64, m.mean, m.std))
-                .collect();
-            draw_band(&mut chart, &points, COLOURS[i % COLOURS.len()], arm.name())?;
+        for (i, (arm, points)) in curves.iter().enumerate() {
+            draw_band(&mut chart, points, COLOURS[i % COLOURS.len()], arm.name())?;
         }
         draw_legend(&mut chart)?;
+        Ok(())
+    })
+}
+
+/// The per-child study's paired differences, one panel per comparison: each child's
+/// difference (sorted; a bar for its 95 % interval over seeds, grey where it is a tie), the
+/// zero line, and the mean over children with its 95 % t interval as a band.
+pub fn per_child_paired_svg(
+    comparisons: &[(String, crate::stats::PairedComparison)],
+    unit_label: &str,
+    subtitle: &str,
+) -> Result<String, String> {
+    use crate::stats::Verdict;
+    panels_svg((1500, 480), subtitle, comparisons.len(), |i, panel| {
+        let (name, c) = &comparisons[i];
+        let mut units = c.per_unit.clone();
+        units.sort_by(|a, b| a.difference.total_cmp(&b.difference));
+        let (mut lo, mut hi) = (0.0f64, 0.0f64);
+        for u in &units {
+            let (l, h) = u
+                .interval
+                .map_or((u.difference, u.difference), |i| (i.low, i.high));
+            lo = lo.min(l);
+            hi = hi.max(h);
+        }
+        if let Some(t) = c.all.t_interval {
+            lo = lo.min(t.low);
+            hi = hi.max(t.high);
+        }
+        let pad = ((hi - lo) * 0.06).max(0.05);
+        let n = units.len().max(1) as f64;
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                format!(
+                    "{name}: {} wins, {} ties, {} losses",
+                    c.all.wins, c.all.ties, c.all.losses
+                ),
+                ("sans-serif", 17),
+            )
+            .margin(14)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..n + 1.0, (lo - pad)..(hi + pad))
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("child (sorted by difference)")
+            .y_desc(unit_label)
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.1}"))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(err)?;
+        let colour = COLOURS[0];
+        if let Some(t) = c.all.t_interval {
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(0.0, t.low), (n + 1.0, t.high)],
+                    colour.mix(0.15).filled(),
+                )))
+                .map_err(err)?;
+        }
+        for (y, style) in [
+            (0.0, BLACK.stroke_width(1)),
+            (c.all.mean, colour.stroke_width(2)),
+        ] {
+            chart
+                .draw_series(LineSeries::new([(0.0, y), (n + 1.0, y)], style))
+                .map_err(err)?;
+        }
+        for (k, u) in units.iter().enumerate() {
+            let x = k as f64 + 1.0;
+            let c = match u.verdict {
+                Verdict::Win => COLOURS[2],
+                Verdict::Loss => COLOURS[1],
+                Verdict::Tie => RGBColor(128, 128, 128),
+            };
+            if let Some(i) = u.interval {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(x, i.low), (x, i.high)],
+                        c.stroke_width(2),
+                    )))
+                    .map_err(err)?;
+            }
+            chart
+                .draw_series(std::iter::once(Circle::new(
+                    (x, u.difference),
+                    4,
+                    c.filled(),
+                )))
+                .map_err(err)?;
+        }
         Ok(())
     })
 }

@@ -1,7 +1,8 @@
 //! Algorithm 1 against a user model, as a tight loop: the user model's F^p, F^e and the reward
 //! are tabulated once per (model, reward) over the 63 inputs, states are row numbers, softmax
 //! weights are cached per state, and one Q-iteration is two random draws, one exp and one
-//! update.
+//! update. The draws come from the run's own stream, or, for studies that compare policies on
+//! the same simulated child, from a session's fixed [`SessionDraws`] (common random numbers).
 
 use crate::learning::{
     Learning, Mode, QTable, best, greedy_set, nth_member, sample_weights, td_target,
@@ -124,6 +125,91 @@ impl SimulatedRun {
     }
 }
 
+/// Whether the child answers a sequence right: `u <= P(success)` for a uniform `u`, as
+/// Algorithm 1 and the authors draw it. The one home of that rule for every simulated session.
+#[inline(always)]
+pub fn answers_right(u: f64, success: f64) -> bool {
+    u <= success
+}
+
+/// Where a session's random numbers come from: a uniform for each sequence's action (softmax
+/// draw or greedy tie-break) and one for the child's answer.
+trait Draws {
+    fn action(&mut self, rng: &mut ChaCha8Rng, step: usize) -> f64;
+    /// Which of `n` (> 1) tied greedy actions.
+    fn tie(&mut self, rng: &mut ChaCha8Rng, step: usize, n: u32) -> u32;
+    fn answer(&mut self, rng: &mut ChaCha8Rng, step: usize) -> f64;
+}
+
+/// The run's own stream, drawn as needed in Algorithm 1's order (a greedy choice without a
+/// tie draws nothing).
+struct RunStream;
+
+impl Draws for RunStream {
+    #[inline(always)]
+    fn action(&mut self, rng: &mut ChaCha8Rng, _: usize) -> f64 {
+        rng.random::<f64>()
+    }
+    #[inline(always)]
+    fn tie(&mut self, rng: &mut ChaCha8Rng, _: usize, n: u32) -> u32 {
+        rng.random_range(0..n)
+    }
+    #[inline(always)]
+    fn answer(&mut self, rng: &mut ChaCha8Rng, _: usize) -> f64 {
+        rng.random::<f64>()
+    }
+}
+
+/// The uniforms of one session fixed in advance, two per sequence whatever the policy does
+/// with them: `action[k]` decides sequence k+1's action (the softmax draw, or which greedy tie;
+/// unused by a greedy choice without a tie) and `answer[k]` the child's answer to it (right
+/// iff `answer[k] <= P(success)` of the sequence played). Policies given the same
+/// `SessionDraws` meet the same simulated child: where they play the same sequence from the
+/// same state the child answers alike, and where they differ the answers are coupled through
+/// the same `answer[k]` (common random numbers).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SessionDraws {
+    pub action: [f64; SEQUENCES_PER_SESSION],
+    pub answer: [f64; SEQUENCES_PER_SESSION],
+}
+
+impl SessionDraws {
+    /// The draws of the session keyed by `seed` (ChaCha8: action then answer, sequence by
+    /// sequence).
+    pub fn new(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut d = SessionDraws {
+            action: [0.0; SEQUENCES_PER_SESSION],
+            answer: [0.0; SEQUENCES_PER_SESSION],
+        };
+        for k in 0..SEQUENCES_PER_SESSION {
+            d.action[k] = rng.random::<f64>();
+            d.answer[k] = rng.random::<f64>();
+        }
+        d
+    }
+
+    /// Which of `n` tied actions the uniform `u` picks: the k-th of n equal slices of [0, 1).
+    pub fn tie_of(u: f64, n: u32) -> u32 {
+        ((u * f64::from(n)) as u32).min(n.saturating_sub(1))
+    }
+}
+
+impl Draws for &SessionDraws {
+    #[inline(always)]
+    fn action(&mut self, _: &mut ChaCha8Rng, step: usize) -> f64 {
+        self.action[step]
+    }
+    #[inline(always)]
+    fn tie(&mut self, _: &mut ChaCha8Rng, step: usize, n: u32) -> u32 {
+        SessionDraws::tie_of(self.action[step], n)
+    }
+    #[inline(always)]
+    fn answer(&mut self, _: &mut ChaCha8Rng, step: usize) -> f64 {
+        self.answer[step]
+    }
+}
+
 /// One run's position inside a session.
 struct Walker<'a> {
     run: &'a mut SimulatedRun,
@@ -144,9 +230,17 @@ impl<'a> Walker<'a> {
         }
     }
 
-    /// One Q-iteration of Algorithm 1.
+    /// One Q-iteration of Algorithm 1: sequence `k` (0-based) of the session.
     #[inline(always)]
-    fn step(&mut self, user: &SimulatedUser, s: &SessionSettings, count_visits: bool, last: bool) {
+    fn step<D: Draws>(
+        &mut self,
+        user: &SimulatedUser,
+        s: &SessionSettings,
+        count_visits: bool,
+        k: usize,
+        draws: &mut D,
+    ) {
+        let last = k + 1 == SEQUENCES_PER_SESSION;
         let learning = &s.learning;
         let state = self.state;
         let run = &mut *self.run;
@@ -161,13 +255,17 @@ impl<'a> Walker<'a> {
                 let t = learning.temperature.at(run.table.visits[state]);
                 let w = run.cache.weights(state, row, t);
                 let total: f64 = w[..allowed].iter().sum();
-                let a = sample_weights(w, allowed, total, run.rng.random::<f64>());
+                let a = sample_weights(w, allowed, total, draws.action(&mut run.rng, k));
                 (a, row[a] < best(row, allowed))
             }
             Mode::Exploit => {
                 let (set, n) = greedy_set(row, allowed);
-                let k = if n > 1 { run.rng.random_range(0..n) } else { 0 };
-                (nth_member(set, k), false)
+                let tie = if n > 1 {
+                    draws.tie(&mut run.rng, k, n)
+                } else {
+                    0
+                };
+                (nth_member(set, tie), false)
             }
         };
         if count_visits {
@@ -182,7 +280,7 @@ impl<'a> Walker<'a> {
         let base = lf_base(level, feedback);
         // F^p and F^e see (L_{t+1}, F_{t+1}, CS_t).
         let input = base + (self.previous_score + 3) as usize;
-        let success = run.rng.random::<f64>() <= user.success[input];
+        let success = answers_right(draws.answer(&mut run.rng, k), user.success[input]);
         let outcome = usize::from(success);
         let reward = user.reward[input][outcome];
         let score = if success {
@@ -231,13 +329,24 @@ pub fn run_session(
     count_visits: bool,
 ) -> SessionMetrics {
     let mut w = Walker::new(run);
-    for step in 0..SEQUENCES_PER_SESSION {
-        w.step(
-            user,
-            settings,
-            count_visits,
-            step + 1 == SEQUENCES_PER_SESSION,
-        );
+    for k in 0..SEQUENCES_PER_SESSION {
+        w.step(user, settings, count_visits, k, &mut RunStream);
+    }
+    w.finish()
+}
+
+/// [`run_session`] with the session's random numbers fixed in advance instead of drawn from
+/// the run's stream: every policy played with the same `draws` meets the same child.
+pub fn run_session_with(
+    run: &mut SimulatedRun,
+    user: &SimulatedUser,
+    settings: &SessionSettings,
+    count_visits: bool,
+    draws: &SessionDraws,
+) -> SessionMetrics {
+    let mut w = Walker::new(run);
+    for k in 0..SEQUENCES_PER_SESSION {
+        w.step(user, settings, count_visits, k, &mut &*draws);
     }
     w.finish()
 }
@@ -252,10 +361,9 @@ pub fn run_sessions<const N: usize>(
     count_visits: bool,
 ) -> [SessionMetrics; N] {
     let mut walkers = runs.each_mut().map(Walker::new);
-    for step in 0..SEQUENCES_PER_SESSION {
-        let last = step + 1 == SEQUENCES_PER_SESSION;
+    for k in 0..SEQUENCES_PER_SESSION {
         for w in walkers.iter_mut() {
-            w.step(user, settings, count_visits, last);
+            w.step(user, settings, count_visits, k, &mut RunStream);
         }
     }
     walkers.map(Walker::finish)

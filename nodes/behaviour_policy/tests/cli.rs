@@ -216,57 +216,159 @@ fn the_fitted_user_models_in_the_repository_load() {
 }
 
 #[test]
-fn evaluate_judges_a_q_table_on_the_sample_bags_and_skips_what_it_cannot_read() {
+fn evaluate_refuses_what_the_sample_bags_cannot_tell() {
     let dir = tempfile::tempdir().expect("tempdir");
     let broken = dir.path().join("broken.mcap");
     std::fs::write(&broken, b"not a bag").expect("write");
+    // A recording cut off at 60 %: read up to the damage, and the damage named.
+    let whole = std::fs::read("../../bags/cluster0_seed7.mcap").expect("sample bag");
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &whole[..whole.len() * 6 / 10]).expect("write");
     let out = dir.path().join("evaluate");
-    let shown = ok(&[
+    let run = |q_table: &str, temperature: &str, extra: &[&str]| {
+        let mut args = vec![
+            "evaluate",
+            "--bags",
+            "../../bags",
+            path(&broken),
+            path(&cut),
+            "--q-table",
+            q_table,
+            "--temperature",
+            temperature,
+            "--bootstrap",
+            "200",
+            "--output",
+            path(&out),
+        ];
+        args.extend(extra);
+        bin(&args)
+    };
+    // The case: cluster 1's table at T = 2 puts 75 % of its probability on actions the
+    // greedy sessions never took. It used to print `WIS 24.55 [24.55, 24.55]`.
+    let o = run("../../bags/q_tables/cluster_1.json", "2", &[]);
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(!o.status.success(), "{stdout}");
+    assert!(stderr.contains("refusing to estimate"), "{stderr}");
+    assert!(
+        stderr.contains("in 100 % of its sessions (75 % of its probability per decision)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--max-off-support"), "{stderr}");
+    assert!(
+        stderr.contains("1 whole session(s) played by the policy, fewer than the 50 needed"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("[  24.55,   24.55]"), "{stdout}");
+    assert!(!out.join("evaluation.json").exists());
+    // What was read, skipped, damaged and left out is said before the refusal.
+    assert!(
+        stdout.contains("bags: 4 read (1 damaged), 1 skipped"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("skipped") && stdout.contains("broken.mcap"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("damaged: ") && stdout.contains("cut.mcap") && stdout.contains("truncated"),
+        "{stdout}"
+    );
+    // The cut copy holds the first sequences of a session the whole bag has: counted once.
+    assert!(stdout.contains("sessions: 3 recorded, 1 evaluated, 2 left out (67 %): 1 stopped before the end, 1 a sequence the therapist chose"), "{stdout}");
+    assert!(
+        stdout.contains("the therapist chose sequence 3"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("lean toward the sessions"), "{stdout}");
+    // The table the sessions were played from stays within their actions: only the number
+    // of sessions is refused, and lowering the limit does not bring back a zero-width
+    // interval from one session.
+    let o = run("../../bags/q_tables/cluster_0.json", "greedy", &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(stderr.contains("fewer than the 50 needed"), "{stderr}");
+    assert!(!stderr.contains("--max-off-support"), "{stderr}");
+    let o = run(
+        "../../bags/q_tables/cluster_0.json",
+        "greedy",
+        &["--min-sessions", "2"],
+    );
+    assert!(!o.status.success());
+    // The cut bag alone: its damage named, its session incomplete, nothing to evaluate.
+    let o = bin(&[
         "evaluate",
         "--bags",
-        "../../bags",
-        path(&broken),
+        path(&cut),
         "--q-table",
         "../../bags/q_tables/cluster_0.json",
-        "--temperature",
-        "1",
-        "--bootstrap",
-        "200",
-        "--output",
-        path(&out),
     ]);
-    // One whole session played by the policy; the stopped one and the one the therapist
-    // steered are left out with their reasons; the broken file is named and skipped.
-    assert!(shown.contains("3 read, 1 skipped"), "{shown}");
-    assert!(
-        shown.contains("sessions: 1 evaluated, 2 left out"),
-        "{shown}"
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
     );
-    assert!(shown.contains("incomplete"), "{shown}");
-    assert!(shown.contains("the therapist chose sequence 3"), "{shown}");
-    assert!(shown.contains("new policy, weighted IS"), "{shown}");
-    // The sessions were played greedily: a softmax policy's other actions were never seen.
+    assert!(!o.status.success());
     assert!(
-        shown.contains("what importance sampling cannot see"),
-        "{shown}"
+        stdout.contains("bags: 1 read (1 damaged), 0 skipped"),
+        "{stdout}"
     );
-    assert!(shown.contains("WARNING"), "{shown}");
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("evaluation.json")).expect("json"))
-            .expect("valid json");
-    assert_eq!(json["sessions"], 1);
-    assert_eq!(json["decisions"], 10);
-    assert!(out.join("evaluation.png").is_file());
-
+    assert!(
+        stdout.contains("is truncated")
+            && stdout.contains("read up to it (6 decisions, 5 results), nothing after"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("incomplete: sequences [1, 2, 3, 4, 5] of 10"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("no whole session"), "{stderr}");
     fails(
         &[
             "evaluate",
             "--bags",
-            path(dir.path()),
+            "../../bags",
             "--q-table",
             "../../bags/q_tables/cluster_0.json",
-            "--output",
-            path(&out),
+            "--min-sessions",
+            "1",
+        ],
+        "at least 2",
+    );
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            "../../bags",
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--max-off-support",
+            "5",
+        ],
+        "between 0 and 1",
+    );
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            path(dir.path().join("none").as_path()),
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+        ],
+        "no such bag or folder",
+    );
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).expect("dir");
+    std::fs::copy(&broken, empty.join("broken.mcap")).expect("copy");
+    fails(
+        &[
+            "evaluate",
+            "--bags",
+            path(&empty),
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
         ],
         "no whole session",
     );
@@ -292,6 +394,213 @@ fn evaluate_judges_a_q_table_on_the_sample_bags_and_skips_what_it_cannot_read() 
         ],
         "greedy",
     );
+}
+
+/// Writes `sessions` into a bag the way the suite records them: the policy's Decision per
+/// sequence (`behaviour_policy::messages::decision_message`), the game manager's
+/// SequenceResult (`nodes/game_manager/src/game/outcome.rs`) and, for the sequences in
+/// `fallbacks`, a GameState with `policy_fallback` (`nodes/game_manager/src/game/mod.rs`,
+/// `publish_state`: set for every state published while the fallback's sequence plays).
+fn write_bag(
+    file: &Path,
+    sessions: &[(behaviour_policy::off_policy::LoggedSession, Vec<[f64; 5]>)],
+    fallbacks: &[(&str, u8)],
+) {
+    use bag_file::{BagWriter, WriterOptions};
+    use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT};
+    use qt_therapy_msgs::{BehaviourState, Decision, GameState, SequenceResult};
+    let mut w = BagWriter::create(file, &WriterOptions::default()).expect("bag");
+    let decisions = w.add_topic(DECISION).expect("topic");
+    let results = w.add_topic(SEQUENCE_RESULT).expect("topic");
+    let states = w.add_topic(GAME_STATE).expect("topic");
+    let mut t = 1_000_000_000u64;
+    for (s, full) in sessions {
+        for (step, p) in s.steps.iter().zip(full) {
+            let (level, feedback) = step.action.apply(step.state).expect("allowed");
+            let state = BehaviourState::from_state(step.state);
+            t += 1_000_000;
+            let decision = Decision {
+                session_id: s.session_id.clone(),
+                step: step.step,
+                state: state.clone(),
+                action: step.action.index() as u8,
+                level: level.get(),
+                feedback: feedback as u8,
+                q_values: vec![0.0; 5],
+                probabilities: p.to_vec(),
+                temperature: 2.0,
+                ..Default::default()
+            };
+            w.write(decisions, t, &decision).expect("write");
+            if fallbacks.contains(&(s.session_id.as_str(), step.step)) {
+                let g = GameState {
+                    phase: GameState::SAYING_SEQUENCE,
+                    session_id: s.session_id.clone(),
+                    sequence_index: step.step,
+                    level: level.get(),
+                    policy_fallback: true,
+                    ..Default::default()
+                };
+                t += 1_000_000;
+                w.write(states, t, &g).expect("write");
+            }
+            t += 1_000_000;
+            let result = SequenceResult {
+                session_id: s.session_id.clone(),
+                sequence_index: step.step,
+                sequences_planned: 10,
+                state,
+                action: step.action.index() as u8,
+                level: level.get(),
+                feedback: feedback as u8,
+                outcome: step.outcome.sign(),
+                activity_result: step.outcome.activity_result(level) as f32,
+                engagement: step.engagement as f32,
+                engagement_per_second: vec![step.engagement as f32],
+                ..Default::default()
+            };
+            w.write(results, t, &result).expect("write");
+        }
+    }
+    w.finish().expect("finish");
+}
+
+#[test]
+fn evaluate_estimates_from_enough_sessions_and_gives_no_interval_that_means_nothing() {
+    use behaviour_policy::mdp::simulate_sessions;
+    use behaviour_policy::off_policy::{TargetPolicy, TargetTemperature};
+    use behaviour_policy::reference_tables::per_level_reference_tables;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let table = behaviour_policy::QTableFile::load(Path::new("../../bags/q_tables/cluster_0.json"))
+        .expect("sample table")
+        .table;
+    // 60 sessions logged by a softmax (every action in the support), in two bags.
+    let logging = TargetPolicy::new(table, TargetTemperature::Fixed(2.0)).expect("policy");
+    let (log, full) = simulate_sessions(&per_level_reference_tables()[0], &logging, 60, 5);
+    let sessions: Vec<_> = log.into_iter().zip(full).collect();
+    write_bag(&dir.path().join("a.mcap"), &sessions[..30], &[]);
+    // In the second, the game manager played its fallback at sequence 4 of one session, and
+    // the policy's late decision (the same action) was recorded too.
+    let late = sessions[30].0.session_id.clone();
+    write_bag(
+        &dir.path().join("b.mcap"),
+        &sessions[30..],
+        &[(late.as_str(), 4)],
+    );
+    let out = dir.path().join("evaluate");
+    let judge = |temperature: &str| {
+        ok(&[
+            "evaluate",
+            "--bags",
+            path(dir.path()),
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--temperature",
+            temperature,
+            "--bootstrap",
+            "300",
+            "--output",
+            path(&out),
+        ])
+    };
+    let shown = judge("1");
+    assert!(
+        shown.contains("bags: 2 read (0 damaged), 0 skipped"),
+        "{shown}"
+    );
+    assert!(
+        shown.contains("sessions: 60 recorded, 59 evaluated, 1 left out (2 %): 0 stopped before the end, 0 a sequence the therapist chose, 1 a sequence the fallback played"),
+        "{shown}"
+    );
+    assert!(
+        shown.contains(&format!(
+            "left out {late}: the game manager played its fallback for sequence 4 (GameState policy_fallback); the decision recorded for it came too late to play"
+        )),
+        "{shown}"
+    );
+    assert!(
+        shown.contains("would leave the actions the logged policy took in 0.0 % of its sessions"),
+        "{shown}"
+    );
+    // A policy near the logger's: every estimate with its interval.
+    assert!(shown.contains("new policy, weighted IS"), "{shown}");
+    assert!(!shown.contains("no interval"), "{shown}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evaluation.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(json["sessions_evaluated"], 59);
+    assert_eq!(json["left_out"][0]["kind"], "Fallback");
+    let estimates = json["estimates"].as_array().expect("estimates");
+    assert_eq!(estimates.len(), 6);
+    for e in estimates {
+        match e["interval"].as_array() {
+            Some(i) => assert!(i[0].as_f64() < i[1].as_f64(), "{e}"),
+            None => assert!(e["no_interval"].is_string(), "{e}"),
+        }
+    }
+    assert!(out.join("evaluation.png").is_file());
+    // A cooler policy agrees with the softmax logger all ten times in few sessions: the
+    // weighted estimate rests on a handful of them and gets no interval (one resting on a
+    // session or two is as narrow as it is wrong); the per-decision estimate keeps its own.
+    let shown = judge("0.5");
+    let line = |name: &str| {
+        shown
+            .lines()
+            .find(|l| l.starts_with(name))
+            .unwrap_or_else(|| panic!("{name} in {shown}"))
+            .to_string()
+    };
+    assert!(line("new policy, per-decision IS").contains('['), "{shown}");
+    assert!(
+        line("new policy, weighted IS").contains("(no interval)"),
+        "{shown}"
+    );
+    assert!(
+        shown.contains("no interval for the new policy, weighted IS: rests on"),
+        "{shown}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("evaluation.json")).expect("json"))
+            .expect("valid json");
+    let weighted: Vec<&serde_json::Value> = json["estimates"]
+        .as_array()
+        .expect("estimates")
+        .iter()
+        .filter(|e| e["estimator"] == "new policy, weighted IS")
+        .collect();
+    assert_eq!(weighted.len(), 2);
+    assert!(weighted.iter().all(|e| e["interval"].is_null()));
+    // Judging the logging policy itself: weight 1 everywhere, every interval given.
+    let shown = ok(&[
+        "evaluate",
+        "--bags",
+        path(dir.path()),
+        "--q-table",
+        "../../bags/q_tables/cluster_0.json",
+        "--temperature",
+        "2",
+        "--min-sessions",
+        "59",
+        "--output",
+        path(&out),
+    ]);
+    assert!(!shown.contains("no interval"), "{shown}");
+    assert!(
+        shown.contains("effective sample size 59.0 of 59 sessions"),
+        "{shown}"
+    );
+    // One more session required than there are: refused.
+    let o = bin(&[
+        "evaluate",
+        "--bags",
+        path(dir.path()),
+        "--q-table",
+        "../../bags/q_tables/cluster_0.json",
+        "--min-sessions",
+        "60",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("59 whole session(s)"));
 }
 
 #[test]
@@ -341,27 +650,44 @@ fn per_child_runs_on_the_study_or_says_where_it_looked() {
         "--study",
         path(&study),
         "--sessions",
-        "3",
+        "6",
         "--seeds",
-        "2",
+        "3",
         "--pretrain-epochs",
         "5",
         "--pretrain-runs",
         "1",
+        "--bootstrap",
+        "500",
         "--output",
         path(dir.path()),
     ]);
     assert!(shown.contains("20 children"), "{shown}");
-    for arm in [
+    for words in [
         "cluster policy",
         "per-user table",
         "from scratch",
-        "ceiling",
+        "optimal for the child's model",
+        "the most any policy can expect",
+        "per_user − cluster, score, sessions 1-6",
+        "  without ",
+        "W/T/L",
     ] {
-        assert!(shown.contains(arm), "{arm}: {shown}");
+        assert!(shown.contains(words), "{words}: {shown}");
     }
-    let csv = std::fs::read_to_string(dir.path().join("per_child.csv")).expect("csv");
-    // 20 children x 4 policies x 2 seeds x 3 sessions, and the header.
-    assert_eq!(csv.lines().count(), 1 + 20 * 4 * 2 * 3);
-    assert!(dir.path().join("per_child.png").is_file());
+    assert!(!shown.contains("ceiling"), "{shown}");
+    let lines = |f: &str| {
+        std::fs::read_to_string(dir.path().join(f))
+            .expect("csv")
+            .lines()
+            .count()
+    };
+    // 20 children x 4 policies x 3 seeds x 6 sessions, and the header.
+    assert_eq!(lines("per_child.csv"), 1 + 20 * 4 * 3 * 6);
+    assert_eq!(lines("per_child_children.csv"), 1 + 20);
+    // 3 comparisons x 4 windows, each with and without its most influential child.
+    assert_eq!(lines("per_child_paired.csv"), 1 + 3 * 4 * 2);
+    for f in ["per_child.png", "per_child_paired.png"] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
 }

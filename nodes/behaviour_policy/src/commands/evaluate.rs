@@ -1,17 +1,19 @@
 //! `behaviour_policy evaluate`: judges a new Q-table on recorded sessions before it meets a
-//! child (counterfactual evaluation from the bags' decisions and results), and
+//! child (counterfactual evaluation from the bags' decisions, results and game states), or
+//! refuses where the sessions cannot tell (too few, or a new policy that leaves the logged
+//! actions: `off_policy::Limits`); it names damaged bags and the share of sessions left out; and
 //! `behaviour_policy evaluate-in-simulation`: the same estimators where the truth is known
 //! (sessions logged against a user model, the new policy's exact value beside the estimates).
 
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
 use behaviour_policy::evaluation_plot::{evaluation_svg, validation_svg};
-use behaviour_policy::messages::{LoggedSessions, logged_sessions};
 use behaviour_policy::off_policy::{
-    Estimate, Evaluation, TargetPolicy, TargetTemperature, evaluate, validate,
+    Evaluation, Limits, TargetPolicy, TargetTemperature, evaluate, validate,
 };
+use behaviour_policy::recorded::{LeftOut, LeftOutKind, LoggedSessions, logged_sessions};
 use behaviour_policy::{Learning, QTableFile, Reward};
-use qt_therapy_msgs::topics::{DECISION, SEQUENCE_RESULT};
+use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -93,9 +95,35 @@ pub struct Args {
     /// Seed of the bootstrap's draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Refuse when the new policy would leave the logged actions in more than this share of
+    /// its sessions (0..1): what the log cannot show would bias every estimate.
+    #[arg(long, default_value_t = Limits::default().max_sessions_leaving_support, value_parser = parse_share)]
+    max_off_support: f64,
+    /// Refuse with fewer whole sessions played by the policy than this (at least 2).
+    #[arg(long, default_value_t = Limits::default().min_sessions, value_parser = parse_min_sessions)]
+    min_sessions: usize,
+    /// No interval for the weighted estimate below this effective sample size.
+    #[arg(long, default_value_t = Limits::default().min_effective_sessions)]
+    min_effective_sessions: f64,
     /// Where evaluation.json, .svg and .png go.
     #[arg(long, default_value = "out/evaluate")]
     output: PathBuf,
+}
+
+fn parse_min_sessions(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 2 => Ok(n),
+        _ => Err(format!(
+            "{s:?} is not a whole number of at least 2 (one session gives no interval)"
+        )),
+    }
+}
+
+fn parse_share(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if (0.0..=1.0).contains(&x) => Ok(x),
+        _ => Err(format!("{s:?} is not a share between 0 and 1")),
+    }
 }
 
 /// Every .mcap under the given paths, sorted, each once.
@@ -130,71 +158,157 @@ fn bag_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// The decisions and results of every readable bag; a bag that cannot be read is named and
-/// skipped.
-fn read_bags(files: &[PathBuf]) -> (LoggedSessions, Vec<(PathBuf, String)>) {
+/// What the bags gave.
+#[derive(Debug, Default, serde::Serialize)]
+struct BagsRead {
+    read: usize,
+    /// Bags that could not be read at all: (bag, why).
+    skipped: Vec<(PathBuf, String)>,
+    /// Bags read only up to damage, or never closed: (bag, what is wrong).
+    damaged: Vec<(PathBuf, String)>,
+}
+
+/// The decisions, results and game states of every readable bag. A bag that cannot be read
+/// is named and skipped; a damaged one is read up to the damage, and the damage named.
+fn read_bags(files: &[PathBuf]) -> (LoggedSessions, BagsRead) {
     let mut decisions = Vec::new();
     let mut results = Vec::new();
-    let mut skipped = Vec::new();
+    let mut states = Vec::new();
+    let mut bags = BagsRead::default();
     for f in files {
         let read = || -> Result<_, bag_file::BagError> {
             let reader = bag_file::BagReader::open(f)?;
             let d = reader.topic_messages(DECISION)?;
             let r = reader.topic_messages(SEQUENCE_RESULT)?;
-            Ok((d, r))
+            let g = reader.topic_messages(GAME_STATE)?;
+            let damage = match (reader.damage(), reader.is_complete()) {
+                (Some(e), _) => Some(format!(
+                    "{e}; read up to it ({} decisions, {} results), nothing after",
+                    d.len(),
+                    r.len()
+                )),
+                (None, false) => Some(format!(
+                    "{}: not closed cleanly (no footer: the recording was cut off); read to \
+                     its last whole record ({} decisions, {} results)",
+                    reader.name(),
+                    d.len(),
+                    r.len()
+                )),
+                (None, true) => None,
+            };
+            Ok((d, r, g, damage))
         };
         match read() {
-            Ok((d, r)) => {
+            Ok((d, r, g, damage)) => {
                 decisions.extend(d);
                 results.extend(r);
+                states.extend(g);
+                bags.read += 1;
+                if let Some(why) = damage {
+                    bags.damaged.push((f.clone(), why));
+                }
             }
-            Err(e) => {
-                eprintln!("skipping {}: {e}", f.display());
-                skipped.push((f.clone(), e.to_string()));
-            }
+            Err(e) => bags.skipped.push((f.clone(), e.to_string())),
         }
     }
-    (logged_sessions(&decisions, &results), skipped)
+    (logged_sessions(&decisions, &results, &states), bags)
 }
 
-fn show(e: Option<Estimate>) -> String {
-    match e {
-        Some(e) => format!("{:>8.2}  [{:>7.2}, {:>7.2}]", e.value, e.low, e.high),
+/// One estimate as it may be shown: its interval, or why there is none.
+#[derive(Debug, Clone, serde::Serialize)]
+struct Shown {
+    estimator: &'static str,
+    quantity: &'static str,
+    value: f64,
+    interval: Option<[f64; 2]>,
+    no_interval: Option<String>,
+}
+
+/// The estimates with the intervals that mean nothing withheld: the weighted estimate's below
+/// the effective sessions required, and any of zero width.
+fn shown(e: &Evaluation, limits: &Limits) -> Vec<Shown> {
+    let mut out = Vec::new();
+    for (quantity, q) in [
+        ("discounted return", &e.discounted_return),
+        ("score", &e.score),
+    ] {
+        for (estimator, x, weighted) in [
+            ("logged policy (actual)", Some(q.logged), false),
+            ("new policy, weighted IS", q.weighted_is, true),
+            (
+                "new policy, per-decision IS",
+                Some(q.per_decision_is),
+                false,
+            ),
+        ] {
+            let Some(x) = x else {
+                continue;
+            };
+            let no_interval = if weighted && !e.weighted_interval_holds(limits) {
+                Some(format!(
+                    "rests on {:.1} effective sessions, below {}",
+                    e.effective_sample_size, limits.min_effective_sessions
+                ))
+            } else if x.high.partial_cmp(&x.low) != Some(std::cmp::Ordering::Greater) {
+                Some("every bootstrap resample gave the same value".into())
+            } else {
+                None
+            };
+            out.push(Shown {
+                estimator,
+                quantity,
+                value: x.value,
+                interval: no_interval.is_none().then_some([x.low, x.high]),
+                no_interval,
+            });
+        }
+    }
+    out
+}
+
+fn cell(s: Option<&Shown>) -> String {
+    match s {
+        Some(Shown {
+            value,
+            interval: Some([lo, hi]),
+            ..
+        }) => format!("{value:>8.2}  [{lo:>7.2}, {hi:>7.2}]"),
+        Some(Shown { value, .. }) => format!("{value:>8.2}  (no interval)"),
         None => format!("{:>8}  (no session has weight)", "-"),
     }
 }
 
-/// Below this many effective sessions an estimate is flagged as not to be trusted (in
-/// simulation, WIS intervals covered the truth in 18 % of seeds at 0.6 effective sessions and
-/// in 90-95 % at 40; see docs/behaviour_policy.md).
-const LOW_EFFECTIVE_SAMPLE_SIZE: f64 = 10.0;
-
-/// The table every evaluation prints.
-fn estimates_table(e: &Evaluation) -> String {
+/// The table every evaluation prints, and the reasons for any interval withheld.
+fn estimates_table(e: &Evaluation, rows: &[Shown]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
         "{:<30} {:>28}   {:>28}",
         "", "discounted return [95 % CI]", "score L·O [95 % CI]"
     );
-    for (name, r, s) in [
-        (
-            "logged policy (actual)",
-            Some(e.discounted_return.logged),
-            Some(e.score.logged),
-        ),
-        (
-            "new policy, weighted IS",
-            e.discounted_return.weighted_is,
-            e.score.weighted_is,
-        ),
-        (
-            "new policy, per-decision IS",
-            Some(e.discounted_return.per_decision_is),
-            Some(e.score.per_decision_is),
-        ),
+    for estimator in [
+        "logged policy (actual)",
+        "new policy, weighted IS",
+        "new policy, per-decision IS",
     ] {
-        let _ = writeln!(out, "{name:<30} {:>28}   {:>28}", show(r), show(s));
+        let find = |quantity: &str| {
+            rows.iter()
+                .find(|r| r.estimator == estimator && r.quantity == quantity)
+        };
+        let _ = writeln!(
+            out,
+            "{estimator:<30} {:>28}   {:>28}",
+            cell(find("discounted return")),
+            cell(find("score"))
+        );
+    }
+    let mut reasons: Vec<String> = rows
+        .iter()
+        .filter_map(|r| Some(format!("{}: {}", r.estimator, r.no_interval.as_ref()?)))
+        .collect();
+    reasons.dedup();
+    for r in reasons {
+        let _ = writeln!(out, "no interval for the {r}");
     }
     let _ = writeln!(
         out,
@@ -202,24 +316,56 @@ fn estimates_table(e: &Evaluation) -> String {
          gives the logged actions probability {:.3} on average",
         e.effective_sample_size, e.sessions, e.sessions_with_weight, e.mean_new_probability
     );
-    if e.effective_sample_size < LOW_EFFECTIVE_SAMPLE_SIZE {
-        let _ = writeln!(
-            out,
-            "WARNING: the weighted estimate rests on {:.1} effective sessions (below {}): the \
-             new policy is too far from the logged one for these sessions to judge it",
-            e.effective_sample_size, LOW_EFFECTIVE_SAMPLE_SIZE
-        );
+    out
+}
+
+/// How much the new policy leaves the logged actions.
+fn support_line(e: &Evaluation) -> String {
+    match (e.sessions_leaving_support, e.mass_outside_support) {
+        (Some(share), Some(per_decision)) => format!(
+            "the new policy would leave the actions the logged policy took in {:.1} % of its \
+             sessions ({:.1} % of its probability per decision)",
+            100.0 * share,
+            100.0 * per_decision
+        ),
+        _ => "the logged distributions are missing: support unknown".into(),
     }
-    if let Some(m) = e.mass_outside_support {
+}
+
+/// The sessions left out, counted by kind, with the bias that leaving them out brings.
+fn left_out_lines(log: &LoggedSessions) -> String {
+    let mut out = String::new();
+    let seen = log.seen();
+    let _ = writeln!(
+        out,
+        "sessions: {seen} recorded, {} evaluated, {} left out ({:.0} %){}",
+        log.sessions.len(),
+        log.left_out.len(),
+        100.0 * log.left_out.len() as f64 / seen.max(1) as f64,
+        if log.left_out.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ": {}",
+                LeftOutKind::ALL
+                    .iter()
+                    .map(|k| format!("{} {}", log.left_out_for(*k), k.describe()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    );
+    for l in &log.left_out {
+        let _ = writeln!(out, "  left out {}: {}", l.session_id, l.reason);
+    }
+    if !log.left_out.is_empty() {
         let _ = writeln!(
             out,
-            "probability the new policy puts on actions the logged one never took: {m:.3} per \
-             decision{}",
-            if m > 0.0 {
-                " (what importance sampling cannot see: treat the estimates as partial)"
-            } else {
-                ""
-            }
+            "  The estimates describe only the sessions the policy played whole. Sessions the \
+             therapist stopped or steered, and those the fallback stepped into, are not a \
+             random share (a therapist steps in when a session goes badly; under supervised \
+             autonomy every replaced proposal drops its session), so the estimates lean \
+             toward the sessions that went as the policy planned."
         );
     }
     out
@@ -246,23 +392,53 @@ fn write_outputs(
     Ok(())
 }
 
+/// What `evaluate` writes to evaluation.json.
+#[derive(Debug, serde::Serialize)]
+struct Report<'a> {
+    q_table: &'a Path,
+    temperature: String,
+    limits: Limits,
+    bags: &'a BagsRead,
+    sessions_recorded: usize,
+    sessions_evaluated: usize,
+    left_out: &'a [LeftOut],
+    estimates: Vec<Shown>,
+    effective_sample_size: f64,
+    sessions_with_weight: usize,
+    mean_new_probability: f64,
+    sessions_leaving_support: Option<f64>,
+    mass_outside_support: Option<f64>,
+    weights: &'a [f64],
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     let (learning, target) = a.judged.load()?;
+    if !(a.min_effective_sessions.is_finite() && a.min_effective_sessions >= 0.0) {
+        bail!("--min-effective-sessions must be a number at least 0");
+    }
+    let limits = Limits {
+        max_sessions_leaving_support: a.max_off_support,
+        min_sessions: a.min_sessions,
+        min_effective_sessions: a.min_effective_sessions,
+    };
     let files = bag_files(&a.bags)?;
     if files.is_empty() {
         bail!("no .mcap bag found under {:?}", a.bags);
     }
-    let (log, skipped) = read_bags(&files);
+    let (log, bags) = read_bags(&files);
     println!(
-        "bags: {} read, {} skipped; sessions: {} evaluated, {} left out",
-        files.len() - skipped.len(),
-        skipped.len(),
-        log.sessions.len(),
-        log.left_out.len()
+        "bags: {} read ({} damaged), {} skipped",
+        bags.read,
+        bags.damaged.len(),
+        bags.skipped.len()
     );
-    for (id, why) in &log.left_out {
-        println!("  left out {id}: {why}");
+    for (bag, why) in &bags.skipped {
+        println!("  skipped {}: {why}", bag.display());
     }
+    for (_, why) in &bags.damaged {
+        println!("  damaged: {why}");
+    }
+    print!("{}", left_out_lines(&log));
     if log.sessions.is_empty() {
         bail!("no whole session played by the policy in the bags: nothing to evaluate");
     }
@@ -275,7 +451,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.seed,
     )?;
     println!(
-        "new policy: {} ({}); reward {}, γ {}; {} bootstrap resamples, seed {}\n",
+        "new policy: {} ({}); reward {}, γ {}; {} bootstrap resamples, seed {}",
         a.judged.q_table.display(),
         a.judged.temperature.describe(),
         learning.reward,
@@ -283,15 +459,60 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.bootstrap,
         a.seed
     );
-    print!("{}", estimates_table(&e));
+    println!("{}", support_line(&e));
+    let refusals = e.refusals(&limits);
+    if !refusals.is_empty() {
+        bail!(
+            "refusing to estimate: {}",
+            refusals
+                .iter()
+                .map(|r| r.to_string())
+                .collect::<Vec<_>>()
+                .join("; and ")
+        );
+    }
+    let rows = shown(&e, &limits);
+    println!();
+    print!("{}", estimates_table(&e, &rows));
+    let report = Report {
+        q_table: &a.judged.q_table,
+        temperature: a.judged.temperature.describe(),
+        limits,
+        bags: &bags,
+        sessions_recorded: log.seen(),
+        sessions_evaluated: e.sessions,
+        left_out: &log.left_out,
+        effective_sample_size: e.effective_sample_size,
+        sessions_with_weight: e.sessions_with_weight,
+        mean_new_probability: e.mean_new_probability,
+        sessions_leaving_support: e.sessions_leaving_support,
+        mass_outside_support: e.mass_outside_support,
+        weights: &e.weights,
+        estimates: rows.clone(),
+    };
+    // The figure draws no bar where the printout gives no interval.
+    let mut drawn = e.clone();
+    for q in [&mut drawn.discounted_return, &mut drawn.score] {
+        if let Some(w) = q.weighted_is.as_mut()
+            && !e.weighted_interval_holds(&limits)
+        {
+            (w.low, w.high) = (w.value, w.value);
+        }
+    }
     let subtitle = format!(
-        "{} judged on {} recorded session(s) ({}); reward {}, 95 % bootstrap intervals",
+        "{} judged on {} recorded session(s) ({}); reward {}, 95 % bootstrap intervals (none \
+         drawn where none holds)",
         a.judged.q_table.display(),
         e.sessions,
         a.judged.temperature.describe(),
         learning.reward
     );
-    write_outputs(&a.output, "evaluation", &e, evaluation_svg(&e, &subtitle))
+    write_outputs(
+        &a.output,
+        "evaluation",
+        &report,
+        evaluation_svg(&drawn, &subtitle),
+    )
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -377,7 +598,15 @@ pub fn run_in_simulation(a: SimulationArgs) -> anyhow::Result<()> {
         ("per-decision IS, return", v.per_decision_is_return),
         ("weighted IS, score", v.weighted_is_score),
         ("per-decision IS, score", v.per_decision_is_score),
+        (
+            "weighted IS, return, where shown",
+            v.weighted_is_return_where_shown,
+        ),
     ] {
+        if c.seeds == 0 {
+            println!("{name:<34} (no seed gave one)");
+            continue;
+        }
         println!(
             "{name:<34} {:>+8.3} {:>8.3} {:>8.1} % of {}",
             c.bias,

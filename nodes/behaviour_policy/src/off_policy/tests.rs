@@ -6,7 +6,7 @@ use super::*;
 use crate::QTableFile;
 use crate::learning::Reward;
 use crate::reference_tables::per_level_reference_tables;
-use sequence_game::Level;
+use sequence_game::{ACTION_COUNT, Level};
 
 fn table(cluster: usize) -> QTable {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -203,12 +203,91 @@ fn estimates_of_another_policy_cover_its_exact_value() {
 }
 
 #[test]
-fn a_greedy_log_says_what_it_cannot_see() {
+fn a_greedy_log_says_what_it_cannot_see_and_is_refused() {
     let model = &per_level_reference_tables()[0];
-    let (log, full) = simulate_sessions(model, &greedy(0), 50, 2);
-    let e = evaluate(&log, Some(&full), &softmax(0, 1.0), &learning(), 100, 2).expect("evaluates");
+    let (log, full) = simulate_sessions(model, &greedy(0), 60, 2);
+    let target = softmax(0, 1.0);
+    let e = evaluate(&log, Some(&full), &target, &learning(), 100, 2).expect("evaluates");
     let outside = e.mass_outside_support.expect("full distributions given");
     assert!(outside > 0.1, "{outside}");
+    // Per session, the chance the new policy stays on the logged actions at every decision.
+    let stays: Vec<f64> = log
+        .iter()
+        .zip(&full)
+        .map(|(s, f)| {
+            s.steps
+                .iter()
+                .zip(f)
+                .map(|(step, logged)| {
+                    let p = target.probabilities(step.state, step.step);
+                    (0..ACTION_COUNT)
+                        .filter(|a| logged[*a] > 0.0)
+                        .map(|a| p[a])
+                        .sum::<f64>()
+                })
+                .product()
+        })
+        .collect();
+    let share = 1.0 - stays.iter().sum::<f64>() / stays.len() as f64;
+    let got = e
+        .sessions_leaving_support
+        .expect("full distributions given");
+    assert!((got - share).abs() < 1e-12, "{got} vs {share}");
+    assert!(share > 0.5, "{share}");
+    // Enough sessions, but off the support: refused, whatever the intervals would say.
+    let refusals = e.refusals(&Limits::default());
+    assert!(
+        matches!(refusals.as_slice(), [Refusal::OffSupport { share: s, .. }] if *s == got),
+        "{refusals:?}"
+    );
+    assert!(refusals[0].to_string().contains("--max-off-support"));
+    assert!(
+        e.refusals(&Limits {
+            max_sessions_leaving_support: 1.0,
+            ..Limits::default()
+        })
+        .is_empty()
+    );
+    // Without the logged distributions the support cannot be checked: refused too.
+    let blind = evaluate(&log, None, &target, &learning(), 10, 2).expect("evaluates");
+    assert_eq!(blind.sessions_leaving_support, None);
+    assert!(
+        blind
+            .refusals(&Limits::default())
+            .contains(&Refusal::SupportUnknown)
+    );
+}
+
+#[test]
+fn too_few_sessions_are_refused_and_thin_weights_get_no_interval() {
+    let model = &per_level_reference_tables()[0];
+    let logging = softmax(0, 2.0);
+    let (log, full) = simulate_sessions(model, &logging, 300, 8);
+    let limits = Limits::default();
+    // The logging policy on its own log: every session counts fully.
+    let e = evaluate(&log, Some(&full), &logging, &learning(), 100, 8).expect("evaluates");
+    assert_eq!(e.sessions_leaving_support, Some(0.0));
+    assert!(e.refusals(&limits).is_empty());
+    assert!(e.weighted_interval_holds(&limits));
+    // A handful of sessions: refused, however close the policies.
+    let few =
+        evaluate(&log[..5], Some(&full[..5]), &logging, &learning(), 100, 8).expect("evaluates");
+    assert_eq!(
+        few.refusals(&limits),
+        [Refusal::TooFewSessions {
+            sessions: 5,
+            minimum: limits.min_sessions
+        }]
+    );
+    // A greedy policy within the softmax's support: estimated, but its weighted estimate
+    // rests on a few sessions and gets no interval.
+    let g = evaluate(&log, Some(&full), &greedy(0), &learning(), 100, 8).expect("evaluates");
+    assert!(g.refusals(&limits).is_empty());
+    assert!(
+        !g.weighted_interval_holds(&limits),
+        "{}",
+        g.effective_sample_size
+    );
 }
 
 #[test]

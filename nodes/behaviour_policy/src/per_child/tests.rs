@@ -47,7 +47,7 @@ fn each_child_is_left_out_of_the_models_that_place_them() {
 }
 
 #[test]
-fn the_policies_differ_in_what_they_learn_and_runs_repeat() {
+fn every_policy_meets_the_same_child_and_runs_repeat() {
     let records = simulate_study(&SyntheticStudy::default());
     let s = spec();
     let cases = cases(&records, &s.fit).expect("cases");
@@ -62,30 +62,116 @@ fn the_policies_differ_in_what_they_learn_and_runs_repeat() {
         }
     }
     // The cluster's policy does not change with the child's sessions; its per-user copy does.
-    let v = |arm: usize| -> Vec<f64> {
+    let v = |arm: Arm| -> Vec<f64> {
         results
             .iter()
-            .flat_map(|r| r.runs[arm].iter().flatten().map(|m| m.start_value))
+            .flat_map(|r| r.runs[arm as usize].iter().flatten().map(|m| m.start_value))
             .collect()
     };
-    let cluster = v(0);
     for r in &results {
         let first = r.runs[0][0][0].start_value;
         assert!(r.runs[0].iter().flatten().all(|m| m.start_value == first));
     }
-    assert_ne!(cluster, v(1));
-    // Trained on the child's own model, the ceiling gets at least what the cluster's policy
-    // gets against that model.
-    let all = 0..s.sessions;
-    let ceiling = summary(
-        &results,
-        Arm::ChildModel,
-        Metric::Return,
-        all.clone(),
-        &|_| true,
-    );
-    let group = summary(&results, Arm::Cluster, Metric::Return, all, &|_| true);
-    assert!(ceiling.mean >= group.mean - 0.5, "{ceiling:?} vs {group:?}");
-    let c = curve(&results, Arm::Scratch, Metric::Score);
-    assert_eq!(c.len(), s.sessions);
+    assert_ne!(v(Arm::Cluster), v(Arm::PerUser));
+    // Common random numbers: a per-user table that cannot learn (α = 0) is the cluster's
+    // policy, and plays exactly its sessions, ties and the child's answers included (with a
+    // stream per policy, as before, they differed).
+    let still = StudySpec {
+        learning: Learning {
+            alpha: 0.0,
+            ..s.learning
+        },
+        ..s.clone()
+    };
+    for (i, case) in picked.iter().enumerate() {
+        let r = run_child(case, i, &still);
+        assert_eq!(r.runs[Arm::Cluster as usize], r.runs[Arm::PerUser as usize]);
+        // A cluster table pretrained with α = 0 is all ties: the draws broke them, and the
+        // sessions still vary.
+        let scores: Vec<f64> = r.runs[0].iter().flatten().map(|m| m.score).collect();
+        assert!(scores.iter().any(|x| *x != scores[0]), "{scores:?}");
+    }
+}
+
+#[test]
+fn the_optimal_policy_bounds_what_the_others_can_expect() {
+    let records = simulate_study(&SyntheticStudy::default());
+    let s = StudySpec {
+        seeds: 20,
+        sessions: 20,
+        ..spec()
+    };
+    let cases = cases(&records, &s.fit).expect("cases");
+    let mut spread = 0.0f64;
+    for (i, case) in cases.iter().take(4).enumerate() {
+        let r = run_child(case, i, &s);
+        let live = SessionSettings {
+            learning: s.learning,
+            mode: Mode::Explore,
+            state_lags_result: false,
+        };
+        let cluster_table = pretrain(
+            &case.cluster_model,
+            &s,
+            &live,
+            seed_of(s.seed, &[i as u64, 0]),
+        );
+        let greedy = crate::off_policy::TargetPolicy::new(
+            cluster_table,
+            crate::off_policy::TargetTemperature::Greedy,
+        )
+        .expect("policy");
+        let cluster = crate::mdp::exact_value(&case.child_model, &greedy, &s.learning);
+        assert!(cluster.discounted_return <= r.bounds.optimal.discounted_return + 1e-9);
+        assert!(cluster.score <= r.bounds.best_score + 1e-9);
+        // Played on the draws, the optimal policy's mean return is its exact value, within
+        // four standard errors of the 400 sessions.
+        let all = Window {
+            metric: Metric::Return,
+            sessions: 0..s.sessions,
+        };
+        let returns: Vec<f64> = r.runs[Arm::Optimal as usize]
+            .iter()
+            .flatten()
+            .map(|m| m.discounted_return)
+            .collect();
+        let se = crate::stats::sample_std(&returns) / (returns.len() as f64).sqrt();
+        let got = child_mean(&r, Arm::Optimal, &all);
+        assert!(
+            (got - r.bounds.optimal.discounted_return).abs() <= 4.0 * se + 1e-6,
+            "{got} vs {:?} (se {se})",
+            r.bounds
+        );
+        spread = spread.max(se);
+    }
+    // Some child's answers vary, so the check above is not only about sure answers.
+    assert!(spread > 0.05, "{spread}");
+}
+
+#[test]
+fn paired_comparisons_are_by_child_and_repeat() {
+    let records = simulate_study(&SyntheticStudy::default());
+    let s = spec();
+    let cases = cases(&records, &s.fit).expect("cases");
+    let results = run_study(&cases[..5], &s, &|| {});
+    let window = &Window::standard(s.sessions)[0];
+    for (a, b) in COMPARISONS {
+        let c = paired(&results, a, b, window, 500, 3);
+        assert_eq!(c, paired(&results, a, b, window, 500, 3));
+        assert_eq!(c.per_unit.len(), 5);
+        assert_eq!(c.all.wins + c.all.ties + c.all.losses, 5);
+        // Each child's difference is the difference of their means.
+        for (u, r) in c.per_unit.iter().zip(&results) {
+            assert_eq!(u.unit, r.user);
+            let d = child_mean(r, a, window) - child_mean(r, b, window);
+            assert!((u.difference - d).abs() < 1e-9);
+        }
+        let mean_of_children =
+            mean_over_children(&results, a, window) - mean_over_children(&results, b, window);
+        assert!((c.all.mean - mean_of_children).abs() < 1e-9);
+        assert!(c.most_influential.is_some());
+    }
+    let curve = curve(&results, Arm::Scratch, Metric::Score);
+    assert_eq!(curve.len(), s.sessions);
+    assert!(curve.iter().all(|(m, i)| i.is_some_and(|i| i.contains(*m))));
 }

@@ -225,3 +225,65 @@ fn interleaved_sessions_equal_separate_sessions() {
         }
     }
 }
+
+#[test]
+fn policies_given_the_same_draws_meet_the_same_child() {
+    // A child whose P(success) is 0.5 and whose engagement is ±0.5 by outcome, whatever the
+    // sequence: with the same draws every policy sees the same right/wrong pattern (so the
+    // same engagement), since the answer to sequence k is decided by answer[k] alone.
+    let model = UserModelTable::tabulate(
+        0,
+        |_| Prediction {
+            mean: 0.5,
+            std: 0.0,
+        },
+        |_, o| Prediction {
+            mean: if o == Outcome::Failure { -0.5 } else { 0.5 },
+            std: 0.0,
+        },
+    );
+    let greedy = settings(Reward::RePlusBetaE, Mode::Exploit, false);
+    let softmax = settings(Reward::RePlusBetaE, Mode::Explore, false);
+    let user = SimulatedUser::new(&model, &greedy.learning);
+    let trained = {
+        let mut run = SimulatedRun::seeded(QTable::default(), 1);
+        for _ in 0..300 {
+            run_session(&mut run, &user, &softmax, true);
+        }
+        run.into_table()
+    };
+    let mut differ = false;
+    for key in 0..20 {
+        let draws = SessionDraws::new(key);
+        let rights = draws.answer.iter().filter(|u| **u <= 0.5).count() as f64;
+        let engagement = 0.5 * (2.0 * rights - 10.0) / 10.0;
+        let mut played = Vec::new();
+        for (table, s) in [
+            (QTable::default(), &softmax),
+            (QTable::default(), &greedy),
+            (trained.clone(), &greedy),
+            (trained.clone(), &softmax),
+        ] {
+            // The run's own stream is never used: two different seeds give the same session.
+            let a = run_session_with(
+                &mut SimulatedRun::seeded(table.clone(), 1),
+                &user,
+                s,
+                true,
+                &draws,
+            );
+            let b = run_session_with(&mut SimulatedRun::seeded(table, 99), &user, s, true, &draws);
+            assert_eq!(a, b);
+            assert!((a.engagement - engagement).abs() < 1e-12, "{a:?}");
+            played.push(a);
+        }
+        differ |= played.iter().any(|m| m.max_score != played[0].max_score);
+    }
+    // ...while what the policies played differs.
+    assert!(differ);
+    // Ties among greedy actions split [0, 1) evenly.
+    assert_eq!(
+        [0.0, 0.33, 0.34, 0.99, 1.0].map(|u| SessionDraws::tie_of(u, 3)),
+        [0, 0, 1, 2, 2]
+    );
+}
