@@ -1,36 +1,58 @@
-//! The shared DDS shell of every node in the suite: the only crate that touches ros2-client.
-//! It reads `params/<node>.yaml` (ROS 2 parameter-file form), joins the ROS 2 graph with the
-//! QoS each topic class needs, delivers validated messages on channels, logs to stderr and
-//! `/rosout`, publishes a heartbeat, exits cleanly on SIGINT/SIGTERM, and exits non-zero if
-//! RustDDS's threads end (so that it is started again). Node cores stay
-//! sans-IO: their binaries only move messages between these channels and the core.
+//! The shared shell of every node in the suite, and the only crate that touches ros2-client.
+//! A node's code is written against [`Bus`] (`bus`): typed publishers and validated
+//! subscriptions on the suite's topics, services, a clock and a stop signal. [`NodeShell`] is
+//! the bus over DDS: it reads `params/<node>.yaml` (ROS 2 parameter-file form), joins the ROS 2
+//! graph with the QoS each topic class needs, logs to stderr and `/rosout`, publishes a
+//! heartbeat, exits cleanly on SIGINT/SIGTERM, and exits non-zero if RustDDS's threads end (so
+//! that it is started again). [`in_process::InProcessBus`] runs the same nodes in one process
+//! on a virtual clock, for the cross-node tests. Node cores stay sans-IO: a node's run loop
+//! only moves messages between its bus and its core.
+//!
+//! One module per job: `options` (command line, parameter files), `environment` (domain,
+//! localhost-only), `qos`, `names`, `participant` (start-up), `publish`, `subscribe`,
+//! `services`, `tap`, `heartbeat`, `shutdown` (signals, clean stop), `security`, `dds_watch`,
+//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`,
+//! `instance_lock`.
 
+pub mod bus;
+pub mod clock;
+mod dds;
 pub mod dds_watch;
 pub mod drops;
+mod environment;
+pub mod heartbeat;
+pub mod in_process;
 pub mod instance_lock;
 pub mod logging;
+mod names;
+mod options;
 pub mod params;
+mod participant;
+mod publish;
+mod qos;
 pub mod security;
-mod shell;
+mod services;
+mod shutdown;
+mod subscribe;
 pub mod tap;
 
-pub use shell::{
-    CallError, NoParameters, NodeShell, Outbox, ServiceCall, ServiceClient, ShellOptions,
-    domain_id_from_env, localhost_only_from_env, qos_profile, ros_name, service_qos,
-};
+pub use bus::{Bus, CallError, Outbox, ServiceCall, ServiceClient};
+pub use clock::Clock;
+pub use environment::{domain_id_from_env, localhost_only_from_env};
+pub use names::ros_name;
+pub use options::{INSTALLED_PARAMS_DIR, NoParameters, ShellOptions};
+pub use participant::NodeShell;
+pub use qos::{qos_profile, service_qos};
 
-use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 
-/// Wall-clock time in nanoseconds since the epoch.
+/// Wall-clock time in nanoseconds since the epoch, for tools and tests; a node reads its
+/// bus's clock instead ([`Bus::clock`]), which is virtual when the suite runs in process.
 pub fn now_nanos() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as i64)
-        .unwrap_or(0)
+    clock::wall_nanos()
 }
 
-/// A header stamped now.
+/// A header stamped now by the wall clock (see [`now_nanos`]).
 pub fn header_now() -> Header {
-    Header::at(Time::from_nanos(now_nanos()))
+    Clock::wall().header_now()
 }

@@ -134,6 +134,29 @@ pub fn enclave_dir(keystore: &Path, enclave: &str) -> PathBuf {
     dir
 }
 
+/// Turns on RustDDS's builtin authentication, access control and cryptography with the
+/// enclave's files. SROS2 keys carry no password.
+#[cfg(feature = "security")]
+pub(crate) fn with_security(
+    builder: rustdds::DomainParticipantBuilder,
+    enclave_dir: &std::path::Path,
+) -> anyhow::Result<rustdds::DomainParticipantBuilder> {
+    Ok(builder.builtin_security(
+        rustdds::DomainParticipantSecurityConfigFiles::with_ros_default_names(
+            enclave_dir,
+            String::new(),
+        ),
+    ))
+}
+
+#[cfg(not(feature = "security"))]
+pub(crate) fn with_security(
+    _builder: rustdds::DomainParticipantBuilder,
+    _enclave_dir: &std::path::Path,
+) -> anyhow::Result<rustdds::DomainParticipantBuilder> {
+    Err(SecurityError::NotBuilt.into())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,8 +5,7 @@
 use bag_file::cdr;
 use bag_file::suite::{PerType, Sample, for_each_suite_type};
 use bag_file::writer::Stamp;
-use node_shell::tap::tap;
-use node_shell::{NodeShell, Outbox};
+use node_shell::{Bus, NodeShell, Outbox};
 use qt_therapy_msgs::MessageDefinition;
 use qt_therapy_msgs::topics::{QosKind, Topic};
 use std::future::Future;
@@ -93,7 +92,7 @@ impl<M: MessageDefinition> DdsType for Typed<M> {
         channel_id: u16,
         tx: mpsc::Sender<Sample>,
     ) -> anyhow::Result<tokio::task::JoinHandle<()>> {
-        tap(shell, Topic::<M>::new(topic, qos), tx, move |t| {
+        shell.tap(Topic::<M>::new(topic, qos), tx, move |t| {
             // The recorder's own heartbeat is not part of the session.
             if t.from_this_participant {
                 return None;
