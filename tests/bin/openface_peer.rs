@@ -8,9 +8,10 @@
 //!   through the stream's buffer (libstdc++: BUFSIZ, 8192 bytes) in pieces that cut lines;
 //!   fixed-point values (timestamp 3 decimals, confidence 2, pose 1 and 3, gaze 6 and 3, AU
 //!   intensities 2, AU presence 1).
-//! - `exe/FeatureExtraction/FeatureExtraction.cpp`: a webcam's timestamp is the time since
-//!   capture started, each frame at the camera's pace; a video file is processed as fast as the
-//!   machine goes; when the run ends the recorder is closed (flushed), then, with AUs on,
+//! - `exe/FeatureExtraction/FeatureExtraction.cpp` and `lib/local/Utilities/src/SequenceCapture.cpp`:
+//!   a webcam's timestamp is the time since capture started when the frame was grabbed, each
+//!   frame at the camera's pace (late on a loaded machine); a video file's is its frame number
+//!   over the video's rate, processed as fast as the machine goes; when the run ends the recorder is closed (flushed), then, with AUs on,
 //!   `FaceAnalyser::PostprocessOutputFile` runs.
 //! - `lib/local/FaceAnalyser/src/FaceAnalyser.cpp` (`PostprocessOutputFile`): the whole CSV is
 //!   read, the same path opened again with `std::ofstream(.., std::ios_base::out)` (truncated,
@@ -156,12 +157,16 @@ fn write_run(
     writeln!(csv, "{}", header())?;
     let start = Instant::now();
     for k in 1..=frames {
-        let timestamp = f64::from(k - 1) / 30.0;
+        // A video file's frames are timed by their number; a webcam's by the clock when the
+        // frame was grabbed (SequenceCapture: ticks since capture started), so a frame grabbed
+        // late on a loaded machine carries its late time.
+        let mut timestamp = f64::from(k - 1) / 30.0;
         if fps > 0.0 {
             let at = Duration::from_secs_f64(f64::from(k - 1) / fps);
             if let Some(wait) = at.checked_sub(start.elapsed()) {
                 std::thread::sleep(wait);
             }
+            timestamp = (start.elapsed().as_secs_f64() * 1000.0).round() / 1000.0;
         }
         writeln!(csv, "{}", row(k, timestamp, k > lost_first))?;
         println!(
