@@ -84,6 +84,8 @@ impl Where {
 }
 
 fn main() {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => std::process::exit(code),

@@ -45,6 +45,8 @@ fn default_log_dir() -> PathBuf {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     let mut overrides = BTreeMap::new();
     for a in &cli.arguments {

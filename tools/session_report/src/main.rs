@@ -30,6 +30,8 @@ struct Cli {
 }
 
 fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     let bag = match &cli.bag {
         Some(bag) => bag.clone(),

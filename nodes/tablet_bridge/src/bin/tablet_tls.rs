@@ -56,6 +56,8 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     match cli.command {
         Command::Init {
