@@ -1,5 +1,8 @@
 //! The user-model node and its command line (`user_model`): the models themselves, their
-//! fitting and their file are the `user_model` library's (`libs/user_model`).
+//! fitting and their file are the `user_model` library's (`libs/user_model`); the node's run
+//! loop, on any bus, is `node`.
+
+pub mod node;
 
 /// Parameters of the user-model node (`params/user_model.yaml`).
 #[derive(Debug, Clone, serde::Deserialize)]
