@@ -14,6 +14,7 @@ pub mod learn_first;
 pub mod learning;
 pub mod mdp;
 pub mod messages;
+pub mod node;
 pub mod off_policy;
 pub mod params;
 pub mod per_child;
