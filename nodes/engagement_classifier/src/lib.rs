@@ -10,6 +10,7 @@ pub mod cross_validation;
 pub mod estimator;
 pub mod messages;
 pub mod model;
+pub mod node;
 pub mod params;
 pub mod preprocessing;
 pub mod ros4hri;
