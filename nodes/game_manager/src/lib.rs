@@ -3,9 +3,11 @@
 //! engagement, policy answers and timer firings in; robot speech, faces and gestures, tablet
 //! tasks, game states, sequence results, policy requests, timer requests, session-file
 //! records and log lines out; a session a killed node left unfinished is taken over from its
-//! files ([`recovery`]). `src/main.rs` connects it to DDS.
+//! files ([`recovery`]). [`node`] runs it on a bus (`node_shell::Bus`); `src/main.rs` starts
+//! that over DDS.
 
 pub mod game;
+pub mod node;
 pub mod params;
 pub mod protocol;
 pub mod recovery;

@@ -1,4 +1,4 @@
-//! The robot side of the game manager's DDS shell: the core's robot acts go to QTrobot's
+//! The robot side of the game manager's run loop: the core's robot acts go to QTrobot's
 //! std_msgs/String topics (`robot_backend: topics`) or to its services (`qtrobot`: V2's
 //! qt_robot_interface; `qtrobot_ros2`: V3's gateway), where the calls of one step run together
 //! and the step is answered with `Input::RobotDone` once every call returned (or
@@ -7,9 +7,9 @@
 //! serves one at a time; the silence (the emergency stop's cancel) goes to the stop gateway,
 //! a second gateway process under `qtrobot_ros2_stop_namespace` that nothing keeps busy.
 
-use game_manager::params::RobotBackend;
-use game_manager::{GameManagerParams, Input};
-use node_shell::{NodeShell, Outbox, ServiceClient};
+use crate::params::RobotBackend;
+use crate::{GameManagerParams, Input};
+use node_shell::{Bus, Outbox, ServiceClient};
 use qt_therapy_msgs::qt_robot_interface::{
     EMOTION_SHOW, EmotionShow, EmotionShowRequest, GESTURE_PLAY, GesturePlay, GesturePlayRequest,
     SPEECH_SAY, SPEECH_STOP, SpeechSay, SpeechSayRequest, SpeechStop, SpeechStopRequest,
@@ -84,32 +84,32 @@ fn under<S: qt_therapy_msgs::ServiceDefinition>(
 
 impl Robot {
     pub fn new(
-        shell: &mut NodeShell,
+        bus: &mut impl Bus,
         params: &GameManagerParams,
         inputs: mpsc::Sender<Input>,
     ) -> anyhow::Result<Robot> {
         let services = match params.robot_backend()? {
             RobotBackend::Topics => {
                 return Ok(Robot::Topics {
-                    speech: shell.publisher(ROBOT_SPEECH)?,
-                    emotion: shell.publisher(ROBOT_EMOTION)?,
-                    gesture: shell.publisher(ROBOT_GESTURE)?,
+                    speech: bus.publisher(ROBOT_SPEECH)?,
+                    emotion: bus.publisher(ROBOT_EMOTION)?,
+                    gesture: bus.publisher(ROBOT_GESTURE)?,
                 });
             }
             RobotBackend::QtRobot => RobotServices::V2 {
-                say: shell.client(SPEECH_SAY)?,
-                stop: shell.client(SPEECH_STOP)?,
-                emotion: shell.client(EMOTION_SHOW)?,
-                gesture: shell.client(GESTURE_PLAY)?,
+                say: bus.client(SPEECH_SAY)?,
+                stop: bus.client(SPEECH_STOP)?,
+                emotion: bus.client(EMOTION_SHOW)?,
+                gesture: bus.client(GESTURE_PLAY)?,
             },
             RobotBackend::QtRobotRos2 => RobotServices::V3 {
-                say: shell.client(v3::SAY_TEXT)?,
+                say: bus.client(v3::SAY_TEXT)?,
                 cancel: match params.qtrobot_ros2_stop_namespace.as_str() {
-                    "" => shell.client(v3::TTS_CANCEL)?,
-                    namespace => shell.client(under(namespace, v3::TTS_CANCEL))?,
+                    "" => bus.client(v3::TTS_CANCEL)?,
+                    namespace => bus.client(under(namespace, v3::TTS_CANCEL))?,
                 },
-                emotion: shell.client(v3::EMOTION_SHOW)?,
-                gesture: shell.client(v3::GESTURE_FILE_PLAY)?,
+                emotion: bus.client(v3::EMOTION_SHOW)?,
+                gesture: bus.client(v3::GESTURE_FILE_PLAY)?,
             },
         };
         Ok(Robot::Services {
@@ -122,18 +122,18 @@ impl Robot {
     }
 
     /// Whether QTrobot's services answer (logged at start-up; calls fail later if not).
-    pub async fn check(&self, shell: &NodeShell, wait: Duration) {
+    pub async fn check(&self, bus: &impl Bus, wait: Duration) {
         let Robot::Services { services, .. } = self else {
             return;
         };
         let (reachable, name, hint) = match services {
             RobotServices::V2 { say, .. } => (
-                shell.wait_for_service(say, wait).await,
+                bus.wait_for_service(say, wait).await,
                 SPEECH_SAY.name,
                 "ros1_bridge running?",
             ),
             RobotServices::V3 { say, .. } => (
-                shell.wait_for_service(say, wait).await,
+                bus.wait_for_service(say, wait).await,
                 v3::SAY_TEXT.name,
                 "LuxAI's gateway running: python -m gateway.qtrobot_ros2?",
             ),
@@ -150,7 +150,7 @@ impl Robot {
             && cancel.name() != v3::TTS_CANCEL.name
         {
             let stop = cancel.name();
-            if shell.wait_for_service(cancel, wait).await {
+            if bus.wait_for_service(cancel, wait).await {
                 tracing::info!("QTrobot's stop gateway reachable ({stop})");
             } else {
                 let namespace = stop.strip_suffix("/tts/engine/cancel").unwrap_or(stop);

@@ -1,0 +1,291 @@
+//! The game manager node's run loop, on any bus (`node_shell::Bus`: DDS on the robot, in
+//! process in the cross-node tests). Moves messages between the bus and the sans-IO core
+//! (`GameManager`): therapist commands, tablet answers, engagement and heartbeats in; robot
+//! speech, faces, gestures (QTrobot's topics or services, `robot`), tablet tasks, game states
+//! and results out; DecideAction calls with a deadline; the core's timers on the bus's clock;
+//! session files; the operator's lines in the log. At start-up, a session a killed
+//! predecessor left unfinished in the sessions directory is taken over.
+
+pub mod robot;
+
+use crate::recovery::{self, RecoveredSession};
+use crate::session_file::SessionFiles;
+use crate::{GameManager, GameManagerParams, Input, LogLevel, Output};
+use anyhow::Context as _;
+use node_shell::{Bus, Clock, Outbox};
+use qt_therapy_msgs::topics::{
+    ACTION_PROPOSAL, DECIDE_ACTION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
+    TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
+};
+use qt_therapy_msgs::{ActionProposal, DecideAction, GameState, SequenceResult, TabletTask};
+use robot::{Act, Robot};
+use std::collections::BTreeSet;
+use std::time::Duration;
+use tokio::sync::mpsc;
+
+/// The node's name on the graph (and its parameter file's).
+pub const NODE: &str = "game_manager";
+
+/// The node's publishers.
+struct Outboxes {
+    task: Outbox<TabletTask>,
+    state: Outbox<GameState>,
+    result: Outbox<SequenceResult>,
+    proposal: Outbox<ActionProposal>,
+}
+
+/// Runs the game with `params` (read from `params_file`, named in errors) until the node is
+/// asked to stop; a session under way is then saved as stopped. The caller holds the lock on
+/// `params.sessions_dir` (`node_shell::instance_lock`).
+pub async fn run(
+    bus: &mut impl Bus,
+    params: GameManagerParams,
+    params_file: &std::path::Path,
+) -> anyhow::Result<()> {
+    let mut core = GameManager::new(params.clone())
+        .with_context(|| format!("parameter file {}", params_file.display()))?;
+    if params.supervised_autonomy && !params.user_model_file.is_empty() {
+        // The σ rule reads the same models as the policy; a file it cannot use is named.
+        let path = std::path::Path::new(&params.user_model_file);
+        let models = user_models::UserModelSet::load(path).with_context(|| {
+            format!(
+                "user_model_file (supervised autonomy's σ rule) in {}",
+                params_file.display()
+            )
+        })?;
+        tracing::info!(file = %path.display(), clusters = models.cluster_count(),
+            "supervised autonomy: proposing decisions above temperature {} or σ {}",
+            params.propose_above_temperature, params.propose_above_success_std);
+        core = core.with_user_models(models.tables());
+    } else if params.supervised_autonomy {
+        tracing::info!(
+            "supervised autonomy: proposing decisions above temperature {} (no user_model_file: \
+             no σ rule)",
+            params.propose_above_temperature
+        );
+    }
+    let mut files = SessionFiles::new(&params.sessions_dir);
+    let out = Outboxes {
+        task: bus.publisher(TABLET_TASK)?,
+        state: bus.publisher(GAME_STATE)?,
+        result: bus.publisher(SEQUENCE_RESULT)?,
+        proposal: bus.publisher(ACTION_PROPOSAL)?,
+    };
+    let mut commands = bus.subscribe(THERAPIST_COMMAND, 64)?;
+    let mut answers = bus.subscribe(TABLET_ANSWER, 64)?;
+    let mut engagement = bus.subscribe(EXPECTED_ENGAGEMENT, 256)?;
+    // Every node's 10 Hz heartbeat; the core watches those named in watched_nodes.
+    let mut heartbeats = bus.subscribe(HEARTBEAT, 256)?;
+    let policy = bus.client(DECIDE_ACTION)?;
+    let clock = bus.clock();
+    // Inputs from tasks of ours: the policy's answers and the robot's steps.
+    let (decided_tx, mut decided) = mpsc::channel::<Input>(16);
+    let mut robot = Robot::new(bus, &params, decided_tx.clone())?;
+    robot.check(bus, Duration::from_secs(5)).await;
+    // (due time, timer id) of the timers the core asked for.
+    let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
+    if params.policy_startup_wait_s > 0.0 {
+        let wait = Duration::from_secs_f64(params.policy_startup_wait_s);
+        tokio::select! {
+            biased;
+            _ = bus.shutdown_signal() => return Ok(()),
+            found = bus.wait_for_service(&policy, wait) => {
+                if found {
+                    tracing::info!("behaviour policy reachable on {}", DECIDE_ACTION.name);
+                } else {
+                    tracing::warn!(
+                        "no {} server within {wait:?}: starting anyway; sequences use the safe \
+                         fallback until it answers",
+                        DECIDE_ACTION.name
+                    );
+                }
+            }
+        }
+    }
+    tracing::info!(sessions_dir = %params.sessions_dir, language = %params.language,
+        time_scale = params.time_scale, "game manager ready");
+
+    let now = clock.now_nanos();
+    let initial = match recovered_session(&mut core, &files, &params, now) {
+        Some(r) => {
+            tracing::warn!(session = %r.session_id, stem = %r.stem, sequences = r.records.len(),
+                "taking over a session left unfinished");
+            files.adopt(&r.session_id, &r.stem);
+            core.recover(r, now)
+        }
+        None => core.initial_outputs(now),
+    };
+    let mut ctx = Dispatch {
+        out: &out,
+        files: &mut files,
+        timers: &mut timers,
+        policy: &policy,
+        decided: &decided_tx,
+        robot: &mut robot,
+        clock,
+    };
+    ctx.apply(initial);
+    let stop = bus.shutdown_signal();
+    tokio::pin!(stop);
+    loop {
+        let next_timer = ctx.timers.first().map(|(at, _)| *at);
+        // Biased: a message already here is handled before a due timer it may make moot (a
+        // heartbeat queued while the loop was busy must not let the watchdog see a loss).
+        let input = tokio::select! {
+            biased;
+            _ = &mut stop => {
+                let outputs = core.handle(Input::Shutdown { reason: "node shut down (signal)".into() }, clock.now_nanos());
+                ctx.apply(outputs);
+                break;
+            }
+            Some(c) = commands.recv() => Input::Command(c),
+            Some(a) = answers.recv() => Input::Answer(a),
+            Some(e) = engagement.recv() => Input::Engagement(e),
+            Some(h) = heartbeats.recv() => Input::Heartbeat(h),
+            Some(d) = decided.recv() => d,
+            _ = clock.sleep_until(next_timer.unwrap_or_default()), if next_timer.is_some() => {
+                match ctx.timers.pop_first() {
+                    Some((_, id)) => Input::TimerFired { id },
+                    None => continue,
+                }
+            }
+        };
+        let span = tracing::info_span!(
+            "session",
+            id = core.session_id().unwrap_or("-"),
+            sequence = core.sequence_index()
+        );
+        let _entered = span.enter();
+        let outputs = core.handle(input, clock.now_nanos());
+        ctx.apply(outputs);
+    }
+    Ok(())
+}
+
+/// Reads the sessions directory: every session id found there is used (a START with it is
+/// refused); the newest unfinished session, if recent enough, is returned to be taken over.
+/// Whatever cannot be read or recovered is named in the log and left on disk as it is.
+fn recovered_session(
+    core: &mut GameManager,
+    files: &SessionFiles,
+    params: &GameManagerParams,
+    now: i64,
+) -> Option<RecoveredSession> {
+    let scan = files.scan();
+    for p in &scan.problems {
+        tracing::warn!("sessions directory: {p}");
+    }
+    core.remember_sessions(scan.finished_ids);
+    let mut candidates = Vec::new();
+    for u in scan.unfinished {
+        match recovery::recover_session(&u.stem, &u.records, &u.journal) {
+            Ok(r) => {
+                core.remember_sessions([r.session_id.clone()]);
+                candidates.push(r);
+            }
+            Err(why) => tracing::warn!(
+                "session files {}/{}.*: not recoverable ({why}); left as they are",
+                files.dir().display(),
+                u.stem
+            ),
+        }
+    }
+    let (chosen, left) = recovery::choose(candidates, now, params.recovery_max_age_s);
+    for l in left {
+        tracing::warn!("{l}");
+    }
+    chosen
+}
+
+/// Carries out the core's outputs, in order.
+struct Dispatch<'a> {
+    out: &'a Outboxes,
+    files: &'a mut SessionFiles,
+    timers: &'a mut BTreeSet<(i64, u64)>,
+    policy: &'a node_shell::ServiceClient<DecideAction>,
+    decided: &'a mpsc::Sender<Input>,
+    robot: &'a mut Robot,
+    clock: Clock,
+}
+
+impl Dispatch<'_> {
+    fn apply(&mut self, outputs: Vec<Output>) {
+        for o in outputs {
+            match o {
+                Output::Say(s) => self.robot.act(Act::Say(s)),
+                Output::ShowEmotion(s) => self.robot.act(Act::Emotion(s)),
+                Output::PlayGesture(s) => self.robot.act(Act::Gesture(s)),
+                Output::AwaitRobot { step } => self.robot.await_step(step),
+                Output::Task(t) => {
+                    self.out.task.send(t);
+                }
+                Output::State(s) => {
+                    self.out.state.send(s);
+                }
+                Output::Result(r) => {
+                    self.out.result.send(r);
+                }
+                Output::Proposal(p) => {
+                    self.out.proposal.send(p);
+                }
+                Output::Decide {
+                    request_id,
+                    request,
+                    deadline_ns,
+                } => {
+                    let client = self.policy.clone();
+                    let tx = self.decided.clone();
+                    // The core falls back at the deadline itself; this only bounds the call.
+                    let left = deadline_ns.saturating_sub(self.clock.now_nanos());
+                    let timeout = Duration::from_nanos(u64::try_from(left).unwrap_or(0))
+                        + Duration::from_millis(500);
+                    tokio::spawn(async move {
+                        let input = match client.call(request, timeout).await {
+                            Ok(response) => Input::Decision {
+                                request_id,
+                                response,
+                            },
+                            Err(e) => Input::DecisionFailed {
+                                request_id,
+                                reason: e.to_string(),
+                            },
+                        };
+                        let _ = tx.send(input).await;
+                    });
+                }
+                Output::SetTimer { id, at_ns } => {
+                    self.timers.insert((at_ns, id));
+                }
+                Output::Record(r) => match self.files.append(&r) {
+                    Ok(path) => tracing::debug!(path = %path.display(), "sequence recorded"),
+                    // Keep the record in the log at least.
+                    Err(e) => tracing::error!(
+                        "{e}; record: {}",
+                        serde_json::to_string(&r).unwrap_or_default()
+                    ),
+                },
+                Output::Journal(e) => match self.files.append_journal(&e) {
+                    Ok(path) => tracing::debug!(path = %path.display(), "journal entry written"),
+                    Err(e2) => tracing::error!(
+                        "{e2}; journal entry: {}",
+                        serde_json::to_string(&e).unwrap_or_default()
+                    ),
+                },
+                Output::Summary(s) => match self.files.write_summary(&s) {
+                    Ok(path) => tracing::info!(path = %path.display(), "session summary written"),
+                    Err(e) => tracing::error!(
+                        "{e}; summary: {}",
+                        serde_json::to_string(&s).unwrap_or_default()
+                    ),
+                },
+                // The operator's line, once: a log record (terminal, log file, journal, /rosout).
+                Output::LiveLine(line) => match line.strip_prefix("!! ") {
+                    Some(alarm) => node_shell::logging::log_at(LogLevel::WARN, alarm),
+                    None => node_shell::logging::log_at(LogLevel::INFO, &line),
+                },
+                Output::Log { level, message } => node_shell::logging::log_at(level, &message),
+            }
+        }
+        self.robot.detach();
+    }
+}
