@@ -1,6 +1,7 @@
 //! The tablet bridge: the child tablet and the therapist tablet as web pages served over
 //! HTTPS + WebSocket, bridged to the suite's DDS topics. `bridge` is the sans-IO core that
-//! checks everything a tablet sends; `server` is the axum shell around it, `tls` its TLS;
+//! checks everything a tablet sends; `node` runs it on a bus (`node_shell::Bus`), its pages'
+//! messages coming from `server`, the axum shell, over HTTPS (`tls`);
 //! `pages` holds the HTML/CSS/JS/SVG compiled into the binary (no build step, no external
 //! resources); `certificates` makes the robot's own CA and server certificate (`tablet_tls`).
 
@@ -9,6 +10,7 @@ pub mod certificates;
 mod child;
 mod game;
 pub mod limits;
+pub mod node;
 pub mod pages;
 pub mod params;
 mod proposal;

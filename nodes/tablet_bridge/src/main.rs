@@ -6,12 +6,9 @@
 use anyhow::Context as _;
 use clap::Parser;
 use node_shell::{NodeShell, ShellOptions};
-use qt_therapy_msgs::topics::{
-    ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
-    TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
-};
-use tablet_bridge::server::{Publish, serve, tls_config};
-use tablet_bridge::{DdsInput, TabletBridgeParams};
+use tablet_bridge::TabletBridgeParams;
+use tablet_bridge::node::{EVENT_QUEUE, NODE};
+use tablet_bridge::server::{bind, serve_pages, tls_config};
 use tokio::sync::mpsc;
 
 #[derive(Parser)]
@@ -41,84 +38,40 @@ fn checked(params: &mut TabletBridgeParams, path: &std::path::Path) -> anyhow::R
     Ok(())
 }
 
-/// Moves one subscription's messages into the bridge's single DDS input channel.
-fn forward<M: Send + 'static>(
-    mut rx: mpsc::Receiver<M>,
-    tx: mpsc::Sender<DdsInput>,
-    wrap: fn(M) -> DdsInput,
-) {
-    tokio::spawn(async move {
-        while let Some(m) = rx.recv().await {
-            if tx.send(wrap(m)).await.is_err() {
-                break;
-            }
-        }
-    });
-}
-
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     if cli.check {
-        let (mut params, path) = cli
-            .shell
-            .parameters::<TabletBridgeParams>("tablet_bridge")?;
+        let (mut params, path) = cli.shell.parameters::<TabletBridgeParams>(NODE)?;
         checked(&mut params, &path)?;
         node_shell::domain_id_from_env()?;
         println!("{}: parameters and environment valid", path.display());
         return Ok(());
     }
     let (mut shell, mut params): (NodeShell, TabletBridgeParams) =
-        NodeShell::start("tablet_bridge", &cli.shell)?;
+        NodeShell::start(NODE, &cli.shell)?;
     // The file actually read (--params-file, QT_PARAMS_DIR or params/) is named, not the default.
-    checked(&mut params, &cli.shell.params_path(shell.name()))?;
-    let result = {
-        let commands = shell.publisher(THERAPIST_COMMAND)?;
-        let answers = shell.publisher(TABLET_ANSWER)?;
-        let (dds_tx, dds_rx) = mpsc::channel(256);
-        forward(
-            shell.subscribe(GAME_STATE, 16)?,
-            dds_tx.clone(),
-            DdsInput::GameState,
-        );
-        forward(
-            shell.subscribe(TABLET_TASK, 16)?,
-            dds_tx.clone(),
-            DdsInput::Task,
-        );
-        forward(
-            shell.subscribe(DECISION, 64)?,
-            dds_tx.clone(),
-            DdsInput::Decision,
-        );
-        forward(
-            shell.subscribe(SEQUENCE_RESULT, 64)?,
-            dds_tx.clone(),
-            DdsInput::Result,
-        );
-        forward(
-            shell.subscribe(ACTION_PROPOSAL, 64)?,
-            dds_tx.clone(),
-            DdsInput::Proposal,
-        );
-        forward(
-            shell.subscribe(EXPECTED_ENGAGEMENT, 64)?,
-            dds_tx.clone(),
-            DdsInput::Engagement,
-        );
-        // Every node's heartbeat; the core watches the game manager's.
-        forward(shell.subscribe(HEARTBEAT, 64)?, dds_tx, DdsInput::Heartbeat);
-        let (publish_tx, mut publish_rx) = mpsc::channel(256);
-        let server = tokio::spawn(serve(params, dds_rx, publish_tx, shell.shutdown_signal()));
-        // The server holds the only sender: this loop ends when the server does.
-        while let Some(p) = publish_rx.recv().await {
-            match p {
-                Publish::Command(c) => commands.send(c),
-                Publish::Answer(a) => answers.send(a),
-            };
+    let outcome = async {
+        checked(&mut params, &cli.shell.params_path(shell.name()))?;
+        let listener = bind(&params).await?;
+        let (events, pages) = mpsc::channel(EVENT_QUEUE);
+        let server = serve_pages(listener, params.clone(), events, shell.shutdown_signal());
+        let node = tablet_bridge::node::run(&mut shell, params, pages);
+        // Both end at SIGINT/SIGTERM (the server returns Ok only then); a server that fails
+        // ends the node.
+        tokio::pin!(server, node);
+        tokio::select! {
+            served = &mut server => {
+                served.context("the tablet pages' server")?;
+                node.await
+            }
+            ran = &mut node => {
+                ran?;
+                server.await.context("the tablet pages' server")
+            }
         }
-        server.await.context("the HTTP server task")?
-    };
+    }
+    .await;
     shell.stop().await;
-    result
+    outcome
 }

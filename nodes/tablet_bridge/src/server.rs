@@ -1,9 +1,12 @@
-//! The HTTPS + WebSocket shell around the core (axum): serves the pages (over TLS when the
+//! The HTTPS + WebSocket side of the bridge (axum): serves the pages (over TLS when the
 //! parameters name a certificate, `tls`), upgrades `/ws/child` and `/ws/therapist`
-//! (same-origin only), and runs one task that owns the core and moves page messages, DDS
-//! messages and the clock through it. No decision is taken here.
+//! (same-origin only), and hands each connection's messages to the core's loop as
+//! [`PageEvent`]s (`node`), which answers each page on its own queue. No decision is taken
+//! here. [`serve_on`] runs the pages with the core's loop on channels instead of a bus (the
+//! HTTP tests).
 
-use crate::bridge::{Bridge, ClientId, DdsInput, Now, Output};
+use crate::bridge::DdsInput;
+use crate::node::{EVENT_QUEUE, PageEvent, ToPage, run_core};
 use crate::pages::Pages;
 use crate::params::TabletBridgeParams;
 use crate::protocol::{Role, ServerMessage};
@@ -15,13 +18,11 @@ use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use qt_therapy_msgs::{TabletAnswer, TherapistCommand};
-use std::collections::HashMap;
 use std::sync::Arc;
-use std::time::Instant;
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot, watch};
 
-/// What the bridge publishes on DDS; the binary hands these to its outboxes.
+/// What the bridge publishes on the bus; the node hands these to its outboxes.
 #[derive(Debug, Clone)]
 pub enum Publish {
     Command(TherapistCommand),
@@ -29,9 +30,7 @@ pub enum Publish {
 }
 
 /// Messages queued for one page before it counts as too slow and is dropped.
-const OUTGOING_QUEUE: usize = 256;
-/// Page events waiting for the core; a flooding page waits here (backpressure).
-const EVENT_QUEUE: usize = 1024;
+pub(crate) const OUTGOING_QUEUE: usize = 256;
 /// WebSocket close code "policy violation".
 const CLOSE_POLICY: u16 = 1008;
 
@@ -41,24 +40,8 @@ const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-
 /// plain-HTTP page on the clinic's network cannot catch the PIN).
 const HSTS: &str = "max-age=31536000";
 
-enum Event {
-    Connect {
-        role: Role,
-        out: mpsc::Sender<Outgoing>,
-        reply: oneshot::Sender<Result<ClientId, String>>,
-    },
-    Text(ClientId, String),
-    Binary(ClientId, usize),
-    Disconnect(ClientId),
-}
-
-enum Outgoing {
-    Text(String),
-    Close(String),
-}
-
 struct Shared {
-    events: mpsc::Sender<Event>,
+    events: mpsc::Sender<PageEvent>,
     pages: Pages,
     /// `https` or `http`: what a page's origin must say.
     scheme: &'static str,
@@ -80,21 +63,16 @@ pub fn origin_allowed(origin: Option<&str>, host: Option<&str>, scheme: &str) ->
         && rest.trim_end_matches('/').eq_ignore_ascii_case(host)
 }
 
-/// Binds `params.http_bind` and serves until `shutdown` resolves.
-pub async fn serve(
-    params: TabletBridgeParams,
-    dds_in: mpsc::Receiver<DdsInput>,
-    publish: mpsc::Sender<Publish>,
-    shutdown: impl Future<Output = ()> + Send + 'static,
-) -> anyhow::Result<()> {
+/// Binds `params.http_bind` for [`serve_pages`].
+pub async fn bind(params: &TabletBridgeParams) -> anyhow::Result<TcpListener> {
     let addr = params.validate()?;
-    let listener = TcpListener::bind(addr)
+    TcpListener::bind(addr)
         .await
-        .with_context(|| format!("binding the tablet pages' address {addr} (http_bind)"))?;
-    serve_on(listener, params, dds_in, publish, shutdown).await
+        .with_context(|| format!("binding the tablet pages' address {addr} (http_bind)"))
 }
 
-/// The TLS configuration the parameters name (None: plain HTTP), for `--check` and [`serve`].
+/// The TLS configuration the parameters name (None: plain HTTP), for `--check` and
+/// [`serve_pages`].
 pub fn tls_config(
     params: &TabletBridgeParams,
 ) -> Result<Option<Arc<rustls::ServerConfig>>, crate::tls::TlsError> {
@@ -104,7 +82,9 @@ pub fn tls_config(
         .transpose()
 }
 
-/// As [`serve`], on a listener the caller bound (tests bind port 0).
+/// The pages and their core's loop on channels, without a bus, on a listener the caller bound
+/// (tests bind port 0), on the wall clock, until `shutdown` resolves: `dds_in` is what the
+/// node would take from the bus, `publish` what it would send.
 pub async fn serve_on(
     listener: TcpListener,
     params: TabletBridgeParams,
@@ -112,10 +92,42 @@ pub async fn serve_on(
     publish: mpsc::Sender<Publish>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
-    let tls = tls_config(&params)?;
-    let clock = Instant::now();
-    let core = Bridge::new(params.clone(), now(clock));
+    let clock = node_shell::Clock::wall();
     let (events, events_rx) = mpsc::channel(EVENT_QUEUE);
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stopped = |rx: &watch::Receiver<bool>| {
+        let mut rx = rx.clone();
+        async move {
+            let _ = rx.wait_for(|stop| *stop).await;
+        }
+    };
+    let core_task = tokio::spawn(run_core(
+        params.clone(),
+        clock,
+        events_rx,
+        dds_in,
+        publish,
+        stopped(&stop_rx),
+    ));
+    tokio::spawn(async move {
+        shutdown.await;
+        let _ = stop_tx.send(true);
+    });
+    let served = serve_pages(listener, params, events, stopped(&stop_rx)).await;
+    core_task.await.context("the bridge core task")?;
+    served
+}
+
+/// Serves the pages on `listener` (over HTTPS when the parameters name a certificate), each
+/// connection's messages to `events`, until `shutdown` resolves and the connections have
+/// closed (the core's loop closes them when it stops).
+pub async fn serve_pages(
+    listener: TcpListener,
+    params: TabletBridgeParams,
+    events: mpsc::Sender<PageEvent>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let tls = tls_config(&params)?;
     let shared = Arc::new(Shared {
         events,
         pages: Pages::new(&params.language),
@@ -125,13 +137,7 @@ pub async fn serve_on(
             .saturating_mul(16)
             .max(64 * 1024),
     });
-    let (stop_tx, stop_rx) = watch::channel(false);
-    let core_task = tokio::spawn(run_core(core, clock, events_rx, dds_in, publish, stop_rx));
     let addr = listener.local_addr()?;
-    let shutdown = async move {
-        shutdown.await;
-        let _ = stop_tx.send(true);
-    };
     match tls {
         Some(config) => {
             tracing::info!(
@@ -162,7 +168,6 @@ pub async fn serve_on(
                 .context("serving HTTP")?;
         }
     }
-    core_task.await.context("the bridge core task")?;
     Ok(())
 }
 
@@ -172,13 +177,6 @@ async fn hsts(mut response: Response) -> Response {
         HeaderValue::from_static(HSTS),
     );
     response
-}
-
-fn now(clock: Instant) -> Now {
-    Now {
-        monotonic: clock.elapsed(),
-        wall_nanos: node_shell::now_nanos(),
-    }
 }
 
 fn router(shared: Arc<Shared>) -> Router {
@@ -248,7 +246,7 @@ async fn connection(s: Arc<Shared>, mut socket: WebSocket, role: Role) {
     let (out, mut out_rx) = mpsc::channel(OUTGOING_QUEUE);
     let (reply, reply_rx) = oneshot::channel();
     if s.events
-        .send(Event::Connect { role, out, reply })
+        .send(PageEvent::Connect { role, out, reply })
         .await
         .is_err()
     {
@@ -272,8 +270,8 @@ async fn connection(s: Arc<Shared>, mut socket: WebSocket, role: Role) {
         tokio::select! {
             incoming = socket.recv() => {
                 let event = match incoming {
-                    Some(Ok(Message::Text(t))) => Event::Text(id, t.to_string()),
-                    Some(Ok(Message::Binary(b))) => Event::Binary(id, b.len()),
+                    Some(Ok(Message::Text(t))) => PageEvent::Text(id, t.to_string()),
+                    Some(Ok(Message::Binary(b))) => PageEvent::Binary(id, b.len()),
                     Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
                     Some(Ok(Message::Close(_))) => {
                         // Flushes the close reply tungstenite queued, so the page sees a clean close.
@@ -291,12 +289,12 @@ async fn connection(s: Arc<Shared>, mut socket: WebSocket, role: Role) {
                 }
             }
             outgoing = out_rx.recv() => match outgoing {
-                Some(Outgoing::Text(t)) => {
+                Some(ToPage::Text(t)) => {
                     if socket.send(Message::Text(t.into())).await.is_err() {
                         break;
                     }
                 }
-                Some(Outgoing::Close(reason)) => {
+                Some(ToPage::Close(reason)) => {
                     close(&mut socket, &reason).await;
                     break;
                 }
@@ -304,7 +302,7 @@ async fn connection(s: Arc<Shared>, mut socket: WebSocket, role: Role) {
             }
         }
     }
-    let _ = s.events.send(Event::Disconnect(id)).await;
+    let _ = s.events.send(PageEvent::Disconnect(id)).await;
 }
 
 async fn close(socket: &mut WebSocket, reason: &str) {
@@ -330,85 +328,6 @@ async fn close(socket: &mut WebSocket, reason: &str) {
         }
     };
     let _ = tokio::time::timeout(std::time::Duration::from_secs(2), drain).await;
-}
-
-async fn run_core(
-    mut core: Bridge,
-    clock: Instant,
-    mut events: mpsc::Receiver<Event>,
-    mut dds_in: mpsc::Receiver<DdsInput>,
-    publish: mpsc::Sender<Publish>,
-    mut stop: watch::Receiver<bool>,
-) {
-    let mut pages: HashMap<ClientId, mpsc::Sender<Outgoing>> = HashMap::new();
-    loop {
-        // The core's next deadline (the game manager's heartbeat timeout), on its clock.
-        let deadline = core.next_deadline();
-        let due = tokio::time::Instant::from_std(clock + deadline.unwrap_or_default());
-        let outputs = tokio::select! {
-            _ = stop.wait_for(|stop| *stop) => break,
-            _ = tokio::time::sleep_until(due), if deadline.is_some() => core.tick(now(clock)),
-            Some(event) = events.recv() => match event {
-                Event::Connect { role, out, reply } => match core.connect(role, now(clock)) {
-                    Ok((id, outputs)) => {
-                        pages.insert(id, out);
-                        let _ = reply.send(Ok(id));
-                        outputs
-                    }
-                    Err(reason) => {
-                        tracing::warn!(?role, "connection refused: {reason}");
-                        let _ = reply.send(Err(reason));
-                        continue;
-                    }
-                },
-                Event::Text(id, text) => core.ws_text(id, &text, now(clock)),
-                Event::Binary(id, len) => core.ws_binary(id, len, now(clock)),
-                Event::Disconnect(id) => {
-                    pages.remove(&id);
-                    core.disconnect(id)
-                }
-            },
-            Some(input) = dds_in.recv() => core.dds(input, now(clock)),
-            else => break,
-        };
-        let mut outputs = std::collections::VecDeque::from(outputs);
-        while let Some(output) = outputs.pop_front() {
-            match output {
-                Output::Send(id, message) => {
-                    let Some(page) = pages.get(&id) else { continue };
-                    let text = match serde_json::to_string(&message) {
-                        Ok(t) => t,
-                        Err(e) => {
-                            tracing::error!(client = id, "could not encode a page message: {e}");
-                            continue;
-                        }
-                    };
-                    if page.try_send(Outgoing::Text(text)).is_err() {
-                        // Dropping its queue ends the connection task.
-                        tracing::warn!(
-                            client = id,
-                            "page too slow or gone: {OUTGOING_QUEUE} messages queued; disconnected"
-                        );
-                        pages.remove(&id);
-                        outputs.extend(core.disconnect(id));
-                    }
-                }
-                Output::Close(id, reason) => {
-                    if let Some(page) = pages.remove(&id) {
-                        let _ = page.try_send(Outgoing::Close(reason));
-                    }
-                }
-                Output::Command(c) => {
-                    let _ = publish.send(Publish::Command(c)).await;
-                }
-                Output::Answer(a) => {
-                    let _ = publish.send(Publish::Answer(a)).await;
-                }
-                Output::Log(level, message) => node_shell::logging::log_at(level, &message),
-            }
-        }
-    }
-    tracing::info!("bridge core stopped; closing the pages' connections");
 }
 
 #[cfg(test)]
