@@ -1,11 +1,12 @@
-//! The suite's message types over DDS, for the recorder and the player: tap a topic into CDR
-//! samples, and publish CDR payloads from a bag as typed messages. The list of types is the
-//! bag library's ([`bag_file::suite::for_each_suite_type`]).
+//! The suite's message types on a bus (`node_shell::Bus`: DDS, or in process), for the
+//! recorder and the player: tap a topic into CDR samples, and publish CDR payloads from a bag
+//! as typed messages. The list of types is the bag library's
+//! ([`bag_file::suite::for_each_suite_type`]).
 
 use bag_file::cdr;
 use bag_file::suite::{PerType, Sample, for_each_suite_type};
 use bag_file::writer::Stamp;
-use node_shell::{Bus, NodeShell, Outbox};
+use node_shell::{Bus, Outbox};
 use qt_therapy_msgs::MessageDefinition;
 use qt_therapy_msgs::topics::{QosKind, Topic};
 use std::future::Future;
@@ -14,28 +15,28 @@ use std::pin::Pin;
 use std::time::Duration;
 use tokio::sync::mpsc;
 
-/// A DDS publisher fed with CDR payloads from a bag.
-pub trait CdrPublisher {
+/// A publisher on bus `B` fed with CDR payloads from a bag.
+pub trait CdrPublisher<B: Bus> {
     fn topic(&self) -> &str;
     /// Decodes `payload` and publishes it.
     fn publish_cdr(&self, payload: &[u8]) -> Result<(), String>;
-    /// Waits until a subscriber matched, or `timeout`; true if one did.
+    /// Waits until a subscriber is there, or `timeout`; true if one is.
     fn wait_for_subscribers<'a>(
         &'a self,
-        shell: &'a NodeShell,
+        bus: &'a B,
         timeout: Duration,
     ) -> Pin<Box<dyn Future<Output = bool> + 'a>>;
 }
 
-/// One message type of the suite, over DDS.
-pub trait DdsType: Send + Sync {
+/// One message type of the suite, on bus `B`.
+pub trait BusType<B: Bus>: Send + Sync {
     /// `pkg/msg/Type`
     fn type_name(&self) -> String;
-    /// Taps `topic` over DDS; every message from another process reaches `tx` as a CDR sample
-    /// on `channel_id`, logged at receipt and published at its source timestamp.
+    /// Taps `topic`; every message from another node reaches `tx` as a CDR sample on
+    /// `channel_id`, logged at receipt and published at its source timestamp.
     fn tap(
         &self,
-        shell: &mut NodeShell,
+        bus: &mut B,
         topic: &'static str,
         qos: QosKind,
         channel_id: u16,
@@ -44,19 +45,19 @@ pub trait DdsType: Send + Sync {
     /// A publisher on `topic` for this type's CDR payloads.
     fn publisher(
         &self,
-        shell: &mut NodeShell,
+        bus: &mut B,
         topic: &'static str,
         qos: QosKind,
-    ) -> anyhow::Result<Box<dyn CdrPublisher>>;
+    ) -> anyhow::Result<Box<dyn CdrPublisher<B>>>;
 }
 
-struct Typed<M>(PhantomData<fn() -> M>);
+struct Typed<M, B>(PhantomData<fn() -> (M, B)>);
 
 struct TypedPublisher<M: MessageDefinition> {
     outbox: Outbox<M>,
 }
 
-impl<M: MessageDefinition> CdrPublisher for TypedPublisher<M> {
+impl<M: MessageDefinition, B: Bus> CdrPublisher<B> for TypedPublisher<M> {
     fn topic(&self) -> &str {
         self.outbox.topic()
     }
@@ -72,27 +73,27 @@ impl<M: MessageDefinition> CdrPublisher for TypedPublisher<M> {
 
     fn wait_for_subscribers<'a>(
         &'a self,
-        shell: &'a NodeShell,
+        bus: &'a B,
         timeout: Duration,
     ) -> Pin<Box<dyn Future<Output = bool> + 'a>> {
-        Box::pin(self.outbox.wait_for_subscribers(shell, timeout))
+        Box::pin(self.outbox.wait_for_subscribers(bus, timeout))
     }
 }
 
-impl<M: MessageDefinition> DdsType for Typed<M> {
+impl<M: MessageDefinition, B: Bus + 'static> BusType<B> for Typed<M, B> {
     fn type_name(&self) -> String {
         M::full_type_name()
     }
 
     fn tap(
         &self,
-        shell: &mut NodeShell,
+        bus: &mut B,
         topic: &'static str,
         qos: QosKind,
         channel_id: u16,
         tx: mpsc::Sender<Sample>,
     ) -> anyhow::Result<tokio::task::JoinHandle<()>> {
-        shell.tap(Topic::<M>::new(topic, qos), tx, move |t| {
+        bus.tap(Topic::<M>::new(topic, qos), tx, move |t| {
             // The recorder's own heartbeat is not part of the session.
             if t.from_this_participant {
                 return None;
@@ -120,27 +121,27 @@ impl<M: MessageDefinition> DdsType for Typed<M> {
 
     fn publisher(
         &self,
-        shell: &mut NodeShell,
+        bus: &mut B,
         topic: &'static str,
         qos: QosKind,
-    ) -> anyhow::Result<Box<dyn CdrPublisher>> {
-        let outbox = shell.publisher(Topic::<M>::new(topic, qos))?;
+    ) -> anyhow::Result<Box<dyn CdrPublisher<B>>> {
+        let outbox = bus.publisher(Topic::<M>::new(topic, qos))?;
         Ok(Box::new(TypedPublisher { outbox }))
     }
 }
 
-struct OverDds;
+struct OnBus<B>(PhantomData<fn() -> B>);
 
-impl PerType for OverDds {
-    type Made = Box<dyn DdsType>;
-    fn make<M: MessageDefinition>(&self) -> Box<dyn DdsType> {
-        Box::new(Typed::<M>(PhantomData))
+impl<B: Bus + 'static> PerType for OnBus<B> {
+    type Made = Box<dyn BusType<B>>;
+    fn make<M: MessageDefinition>(&self) -> Box<dyn BusType<B>> {
+        Box::new(Typed::<M, B>(PhantomData))
     }
 }
 
-/// The suite type named `type_name` (`pkg/msg/Type`), over DDS.
-pub fn dds_type(type_name: &str) -> Option<Box<dyn DdsType>> {
-    for_each_suite_type(&OverDds)
+/// The suite type named `type_name` (`pkg/msg/Type`), on bus `B`.
+pub fn bus_type<B: Bus + 'static>(type_name: &str) -> Option<Box<dyn BusType<B>>> {
+    for_each_suite_type(&OnBus::<B>(PhantomData))
         .into_iter()
         .find(|t| t.type_name() == type_name)
 }

@@ -3,7 +3,7 @@
 //! loop. A damaged bag plays up to its first bad record; channels of unknown types are skipped.
 
 use anyhow::{Context as _, bail};
-use bag::dds_types::{CdrPublisher, dds_type};
+use bag::dds_types::{CdrPublisher, bus_type};
 use bag::params::PlayerParams;
 use bag_file::schedule::{PlayOptions, parse_remap, plan};
 use bag_file::suite::suite_type;
@@ -118,9 +118,9 @@ pub async fn run(args: PlayArgs) -> anyhow::Result<()> {
     if plan.outputs.is_empty() {
         bail!("{}: nothing to play", args.bag.display());
     }
-    let mut publishers: Vec<Box<dyn CdrPublisher>> = Vec::new();
+    let mut publishers: Vec<Box<dyn CdrPublisher<NodeShell>>> = Vec::new();
     for out in &plan.outputs {
-        let ty = dds_type(&out.type_name).context("a planned type is known")?;
+        let ty = bus_type::<NodeShell>(&out.type_name).context("a planned type is known")?;
         // Offer what the recording publisher offered; else what the suite's table says.
         let qos = reader
             .channel(out.channel_id)

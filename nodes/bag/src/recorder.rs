@@ -1,4 +1,5 @@
-//! `bag record`: taps the suite's topics over DDS and writes every message into one MCAP file
+//! The bag recorder's run loop, on any bus (`node_shell::Bus`: DDS for `bag record`, in
+//! process in the cross-node tests): taps the suite's topics and writes every message into one MCAP file
 //! (`<output>.partial` until a clean exit renames it). A chunk is closed and handed to the OS
 //! at least every `flush_interval_s`, so a killed recorder loses at most that much; SIGINT or
 //! SIGTERM drains the queue and writes the summary. A recorder started on the output of one
@@ -7,34 +8,30 @@
 //! Transient-local topics hand the new recorder their history again; what it carried over is
 //! not written twice.
 
+use crate::dds_types::bus_type;
+use crate::params::RecorderParams;
 use anyhow::{Context as _, bail};
-use bag::dds_types::dds_type;
-use bag::params::RecorderParams;
 use bag_file::qos::offered_qos_yaml;
 use bag_file::{BagReader, BagWriter, Compression, Stamp, WriterOptions, partial_path};
-use node_shell::{NodeShell, ShellOptions};
+use node_shell::{Bus, Clock};
 use qt_therapy_msgs::topics::{QosKind, TopicInfo, all_topics};
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::sync::mpsc;
 
-#[derive(clap::Args, Debug)]
-pub struct RecordArgs {
-    /// The bag to write (an .mcap file).
-    #[arg(short, long)]
+/// The node's name on the graph (and its parameter file's).
+pub const NODE: &str = "bag_recorder";
+
+/// What to record where.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    /// The bag to write (an .mcap file); it must not exist.
     pub output: PathBuf,
-    /// Topics to record [default: the parameter file's list; empty = all]
-    #[arg(long, num_args = 1..)]
+    /// Topics of the suite to record; empty: every one.
     pub topics: Vec<String>,
-    /// Record every topic of the suite, whatever the parameter file lists.
-    #[arg(long, conflicts_with = "topics")]
-    pub all: bool,
-    /// zstd, lz4 or none [default: the parameter file's]
-    #[arg(long)]
+    /// Overrides the parameters' compression.
     pub compression: Option<Compression>,
-    #[command(flatten)]
-    pub shell: ShellOptions,
 }
 
 /// The suite topics named in `wanted` (all when empty); an unknown name is an error.
@@ -87,12 +84,12 @@ fn writer_options(
 
 /// Moves a dead recorder's `<output>.partial` aside (never overwritten) and reads what it holds
 /// up to its first damage (the chunk cut short by the kill).
-fn take_over_partial(output: &Path) -> anyhow::Result<Option<(PathBuf, BagReader)>> {
+fn take_over_partial(output: &Path, clock: Clock) -> anyhow::Result<Option<(PathBuf, BagReader)>> {
     let partial = partial_path(output);
     if !partial.exists() {
         return Ok(None);
     }
-    let stamp = node_shell::now_nanos();
+    let stamp = clock.now_nanos();
     let mut aside = partial.clone().into_os_string();
     aside.push(format!(".crashed-{stamp}"));
     let aside = PathBuf::from(aside);
@@ -184,36 +181,33 @@ fn write_sample(
     Ok(())
 }
 
-pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
-    let (mut shell, params): (NodeShell, RecorderParams) =
-        NodeShell::start("bag_recorder", &args.shell)?;
+/// Records `what` with `params` until the node is asked to stop, then finishes the bag;
+/// returns how many messages it holds.
+pub async fn run<B: Bus + 'static>(
+    bus: &mut B,
+    params: RecorderParams,
+    what: Recording,
+) -> anyhow::Result<u64> {
     if !(params.flush_interval_s > 0.0 && params.flush_interval_s <= 60.0) {
         bail!(
             "bag_recorder.flush_interval_s = {} is not in (0, 60]",
             params.flush_interval_s
         );
     }
-    let wanted = if args.all {
-        Vec::new()
-    } else if args.topics.is_empty() {
-        params.topics.clone()
-    } else {
-        args.topics.clone()
-    };
-    let topics = select_topics(&wanted)?;
+    let topics = select_topics(&what.topics)?;
     // A recorded session is never overwritten by the next one.
-    if args.output.exists() {
-        bail!("{} exists; record to a new name", args.output.display());
+    if what.output.exists() {
+        bail!("{} exists; record to a new name", what.output.display());
     }
-    let options = writer_options(&params, args.compression)?;
-    let taken_over = take_over_partial(&args.output)?;
-    let mut writer = BagWriter::create(&args.output, &options)?;
+    let options = writer_options(&params, what.compression)?;
+    let taken_over = take_over_partial(&what.output, bus.clock())?;
+    let mut writer = BagWriter::create(&what.output, &options)?;
     let capacity = usize::try_from(params.queue_capacity.max(1)).unwrap_or(4096);
     let (tx, mut rx) = mpsc::channel(capacity);
     let mut taps = Vec::new();
     let mut channels = BTreeMap::new();
     for t in &topics {
-        let Some(ty) = dds_type(&t.type_name) else {
+        let Some(ty) = bus_type::<B>(&t.type_name) else {
             bail!(
                 "{} has type {}, which the recorder does not know",
                 t.name,
@@ -227,7 +221,7 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
             &offered_qos_yaml(t.qos),
         )?;
         channels.insert(t.name.to_string(), id);
-        taps.push(ty.tap(&mut shell, t.name, t.qos, id, tx.clone())?);
+        taps.push(ty.tap(bus, t.name, t.qos, id, tx.clone())?);
     }
     drop(tx);
     let mut carried = HashSet::new();
@@ -243,17 +237,20 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
     // Schemas and channels reach the disk at once, so even an empty recording is readable.
     writer.flush_chunk()?;
     tracing::info!(
-        output = %args.output.display(),
+        output = %what.output.display(),
         topics = topics.len(),
         compression = ?options.compression,
         "recording"
     );
     let progress = indicatif::ProgressBar::new_spinner();
-    let stop = shell.shutdown_signal();
+    let stop = bus.shutdown_signal();
     tokio::pin!(stop);
     let mut flush = tokio::time::interval(Duration::from_secs_f64(params.flush_interval_s));
     loop {
+        // Biased: what is ready is taken in this order, never by tokio's random pick, so a
+        // run on the in-process bus is the same every time.
         tokio::select! {
+            biased;
             _ = &mut stop => break,
             _ = flush.tick() => {
                 // What the readers queued before the tick belongs in this flush.
@@ -283,18 +280,13 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
     let messages = writer.message_count();
     writer
         .finish()
-        .with_context(|| format!("finishing {}", args.output.display()))?;
-    tracing::info!(output = %args.output.display(), messages, "bag written");
+        .with_context(|| format!("finishing {}", what.output.display()))?;
+    tracing::info!(output = %what.output.display(), messages, "bag written");
     // Its messages are now in the finished bag.
     if let Some((aside, _)) = taken_over
         && let Err(e) = std::fs::remove_file(&aside)
     {
         tracing::warn!(file = %aside.display(), "could not remove: {e}");
     }
-    println!(
-        "{}",
-        serde_json::json!({"event": "recorded", "output": args.output, "messages": messages})
-    );
-    shell.stop().await;
-    Ok(())
+    Ok(messages)
 }
