@@ -10,6 +10,9 @@
 //! frame clock. So the same seed and the same game give the same answers however many frames a
 //! loaded machine let the child publish in between.
 
+/// The child's run loop on a bus (DDS or in process).
+pub mod node;
+
 use openface::synthetic::{SyntheticSpec, generate};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
