@@ -3,18 +3,15 @@
 //!   therapist run-session --user sim-child --cluster 0   (start, follow to the end)
 //!   therapist override --session S --level 1 | pause | resume | stop | emergency-stop
 //!   therapist encourage --session S | challenge | accept    (feedback; the open proposal)
+//! The console's logic is the library's (`therapist_console::console`); this parses the
+//! command line, starts the DDS shell and hands over.
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::{Parser, Subcommand};
-use node_shell::{NoParameters, NodeShell, Outbox, ShellOptions, header_now, now_nanos};
-use qt_therapy_msgs::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
-use qt_therapy_msgs::topics::{
-    ACTION_PROPOSAL, DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND,
-};
-use qt_therapy_msgs::{ActionProposal, Decision, GameState, TherapistCommand};
+use node_shell::{Bus, NoParameters, NodeShell, ShellOptions};
+use qt_therapy_msgs::TherapistCommand;
 use std::time::Duration;
-
-mod proposals;
+use therapist_console::console::{Console, Follow, NODE, Start};
 
 #[derive(Parser)]
 #[command(about = "Send therapist commands to the game manager and follow a session")]
@@ -88,20 +85,10 @@ struct SessionArg {
     session: String,
 }
 
-/// Command ids only increase: milliseconds since the epoch.
-fn command(kind: u8, session: &str) -> TherapistCommand {
-    TherapistCommand {
-        header: header_now(),
-        command: kind,
-        session_id: session.to_string(),
-        command_id: (now_nanos() / 1_000_000).max(1) as u64,
-        ..Default::default()
-    }
-}
-
 impl Command {
     /// The one command a session command line sends (None for start and run-session).
-    fn session_command(&self) -> Option<TherapistCommand> {
+    fn session_command<B: Bus>(&self, console: &Console<'_, B>) -> Option<TherapistCommand> {
+        let command = |kind, session: &str| console.command(kind, session);
         let (code, s) = match self {
             Command::Start(_) | Command::RunSession { .. } => return None,
             Command::Pause(s) => (TherapistCommand::PAUSE, s),
@@ -121,22 +108,29 @@ impl Command {
     }
 }
 
+impl StartArgs {
+    fn start(&self) -> Start {
+        Start {
+            user: self.user.clone(),
+            cluster: self.cluster,
+            session: self.session.clone(),
+            wait: Duration::from_secs(self.wait),
+        }
+    }
+}
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    let (mut shell, NoParameters {}) = NodeShell::start("therapist_console", &cli.shell)?;
+    let (mut shell, NoParameters {}) = NodeShell::start(NODE, &cli.shell)?;
     // Every way out, errors included, stops the shell first: its DDS entities go before the
     // participant, so the error is the last thing the therapist reads, not RustDDS noise.
     let outcome: anyhow::Result<i32> = async {
-        let commands = shell.publisher(THERAPIST_COMMAND)?;
-        let mut states = shell.subscribe(GAME_STATE, 64)?;
-        let mut results = shell.subscribe(SEQUENCE_RESULT, 64)?;
-        let mut decisions = shell.subscribe(DECISION, 64)?;
-        let mut proposals = shell.subscribe(ACTION_PROPOSAL, 64)?;
-        let code = match cli.command {
+        let mut console = Console::new(&mut shell, |line: &str| println!("{line}"))?;
+        match cli.command {
             Command::Start(a) => {
-                let c = start_command(&a, Some(&mut states)).await?;
-                send(&commands, &shell, &mut states, c).await?
+                let c = console.start_command(&a.start(), true).await?;
+                console.send(c).await
             }
             Command::RunSession {
                 start,
@@ -144,375 +138,22 @@ async fn main() -> anyhow::Result<()> {
                 sessions,
                 accept_proposals,
             } => {
-                let mut code = 0;
-                for k in 1..=sessions {
-                    let check = (k == 1).then_some(&mut states);
-                    let mut c = start_command(&start, check).await?;
-                    if sessions > 1 {
-                        c.session_id = format!("{}-{k:05}", c.session_id);
-                    }
-                    let session = c.session_id.clone();
-                    let start_id = c.command_id;
-                    code = send(&commands, &shell, &mut states, c).await?;
-                    if code != 0 {
-                        break;
-                    }
-                    println!(
-                        "session {session} started for user {} (cluster {})",
-                        start.user, start.cluster
-                    );
-                    let inputs = Inputs {
-                        states: &mut states,
-                        results: &mut results,
-                        decisions: &mut decisions,
-                        proposals: &mut proposals,
-                    };
-                    let proposals = proposals::Proposals::new(&session, accept_proposals, start_id);
-                    code = follow(
-                        &session,
-                        inputs,
-                        proposals,
-                        &commands,
-                        Duration::from_secs(timeout),
-                        &shell,
-                    )
-                    .await?;
-                    if code != 0 {
-                        break;
-                    }
-                }
-                code
+                let follow = Follow {
+                    timeout: Duration::from_secs(timeout),
+                    sessions,
+                    accept_proposals,
+                };
+                console.run_session(&start.start(), follow).await
             }
             single => {
                 let c = single
-                    .session_command()
+                    .session_command(&console)
                     .context("start and run-session are handled above")?;
-                send(&commands, &shell, &mut states, c).await?
+                console.send(c).await
             }
-        };
-        Ok(code)
+        }
     }
     .await;
     shell.stop().await;
     std::process::exit(outcome?);
-}
-
-/// How long the console waits for the game manager to confirm a command before sending it
-/// again, and how many times it sends one.
-const CONFIRM_WAIT: Duration = Duration::from_secs(2);
-const SENDS: u32 = 3;
-
-/// Sends one command once a reader listens, then waits until the game manager answers it: a
-/// GameState whose `command_session_id` and `command_id` name it, with what became of it
-/// (`command_outcome`). The answer is needed because a reliable sample still misses a reader
-/// that matched after it was sent (the recorder may match first), or when this process exits
-/// before it was delivered: an override was once lost that way. An unanswered command is sent
-/// again with the same id, which the game manager never carries out twice (it answers a repeat
-/// of one it carried out as such). Returns the exit code: 0 carried out, 4 refused (the reason
-/// is printed).
-async fn send(
-    commands: &Outbox<TherapistCommand>,
-    shell: &NodeShell,
-    states: &mut tokio::sync::mpsc::Receiver<GameState>,
-    c: TherapistCommand,
-) -> anyhow::Result<i32> {
-    if !commands
-        .wait_for_subscribers(shell, Duration::from_secs(20))
-        .await
-    {
-        bail!("no game manager is listening on {}", THERAPIST_COMMAND.name);
-    }
-    let tag = format!("command {}", c.command_id);
-    for attempt in 1..=SENDS {
-        commands.send(c.clone());
-        let until = tokio::time::Instant::now() + CONFIRM_WAIT;
-        while let Ok(Some(s)) = tokio::time::timeout_at(until, states.recv()).await {
-            match answer_to(&c, &s) {
-                None => continue,
-                Some(Answer::CarriedOut) => return Ok(0),
-                Some(Answer::Refused(reason)) => {
-                    println!("{tag} refused: {reason}");
-                    return Ok(4);
-                }
-            }
-        }
-        if attempt < SENDS {
-            tracing::warn!(
-                "{tag} not answered by the game manager within {CONFIRM_WAIT:?}: sending it again"
-            );
-        }
-    }
-    bail!(
-        "the game manager did not answer {tag} (session {:?}) after {SENDS} sends",
-        c.session_id
-    )
-}
-
-/// What the game manager did with a command.
-#[derive(Debug, PartialEq)]
-enum Answer {
-    CarriedOut,
-    Refused(String),
-}
-
-/// The answer to `c` that `s` carries, if it carries one: its typed fields, never its status
-/// text. A repeat of a command carried out before is refused as such: it was carried out.
-fn answer_to(c: &TherapistCommand, s: &GameState) -> Option<Answer> {
-    if s.command_session_id != c.session_id || s.command_id != c.command_id {
-        return None;
-    }
-    match s.command_outcome {
-        GameState::COMMAND_CARRIED_OUT | GameState::COMMAND_ALREADY_CARRIED_OUT => {
-            Some(Answer::CarriedOut)
-        }
-        GameState::COMMAND_REFUSED => Some(Answer::Refused(s.command_refusal.clone())),
-        _ => None,
-    }
-}
-
-/// The START command, once the game manager is free. `states` None: it is known to be (the
-/// session this console followed just finished).
-async fn start_command(
-    a: &StartArgs,
-    states: Option<&mut tokio::sync::mpsc::Receiver<GameState>>,
-) -> anyhow::Result<TherapistCommand> {
-    if let Some(states) = states {
-        check_free(a, states).await?;
-    }
-    let session = a
-        .session
-        .clone()
-        .unwrap_or_else(|| format!("session-{}", now_nanos() / 1_000_000_000));
-    let mut c = command(TherapistCommand::START, &session);
-    c.user_id = a.user.clone();
-    c.user_model_cluster = a.cluster;
-    Ok(c)
-}
-
-/// Fails when no game manager answers or it is busy with a session.
-async fn check_free(
-    a: &StartArgs,
-    states: &mut tokio::sync::mpsc::Receiver<GameState>,
-) -> anyhow::Result<()> {
-    // The game state is transient-local: a running game manager's last state arrives at once.
-    let state = tokio::time::timeout(Duration::from_secs(a.wait), states.recv())
-        .await
-        .with_context(|| {
-            format!(
-                "no game manager published {} within {} s",
-                GAME_STATE.name, a.wait
-            )
-        })?
-        .context("game state channel closed")?;
-    // RustDDS hands a new transient-local reader every sample its writer still keeps for a
-    // reader that has not acknowledged it yet (e.g. the console of the session before, just
-    // gone), oldest first: the game's state now is the newest that arrives in a short while.
-    let mut state = state;
-    let settle = tokio::time::Instant::now() + Duration::from_millis(500);
-    while let Ok(Some(s)) = tokio::time::timeout_at(settle, states.recv()).await {
-        if (s.header.stamp.sec, s.header.stamp.nanosec)
-            >= (state.header.stamp.sec, state.header.stamp.nanosec)
-        {
-            state = s;
-        }
-    }
-    if !matches!(
-        state.phase,
-        GameState::IDLE | GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
-    ) {
-        bail!(
-            "the game manager is busy with session {} (phase {}): stop it first",
-            state.session_id,
-            state.phase
-        );
-    }
-    Ok(())
-}
-
-/// What `follow` listens to.
-struct Inputs<'a> {
-    states: &'a mut tokio::sync::mpsc::Receiver<GameState>,
-    results: &'a mut tokio::sync::mpsc::Receiver<qt_therapy_msgs::SequenceResult>,
-    decisions: &'a mut tokio::sync::mpsc::Receiver<Decision>,
-    proposals: &'a mut tokio::sync::mpsc::Receiver<ActionProposal>,
-}
-
-/// Prints the session's steps, a line per sequence and per proposal and its settlement, until
-/// the session ends; with `proposals` accepting, accepts each proposal (answers to those
-/// accepts come on the game states, read here as well).
-async fn follow(
-    session: &str,
-    inputs: Inputs<'_>,
-    mut proposals: proposals::Proposals,
-    commands: &Outbox<TherapistCommand>,
-    timeout: Duration,
-    shell: &NodeShell,
-) -> anyhow::Result<i32> {
-    let Inputs {
-        states,
-        results,
-        decisions,
-        proposals: proposal_messages,
-    } = inputs;
-    let carry_out = |events: Vec<proposals::Event>| {
-        for e in events {
-            match e {
-                proposals::Event::Print(line) => println!("{line}"),
-                proposals::Event::Send(c) => {
-                    commands.send(c);
-                }
-            }
-        }
-    };
-    let deadline = tokio::time::sleep(timeout);
-    tokio::pin!(deadline);
-    let stop = shell.shutdown_signal();
-    tokio::pin!(stop);
-    let mut seen: Vec<Decision> = Vec::new();
-    let mut last_status = String::new();
-    let mut results_seen = 0;
-    loop {
-        let resend = proposals.next_send();
-        // Far enough never to come: the branch is disabled without a send due.
-        let resend_at = resend.unwrap_or_else(|| std::time::Instant::now() + timeout);
-        tokio::select! {
-            _ = &mut deadline => { println!("session {session}: no end within {timeout:?}"); return Ok(2); }
-            _ = &mut stop => return Ok(130),
-            _ = tokio::time::sleep_until(resend_at.into()), if resend.is_some() => {
-                carry_out(proposals.on_tick(std::time::Instant::now()));
-            }
-            Some(p) = proposal_messages.recv() => {
-                let now_ms = (now_nanos() / 1_000_000).max(1) as u64;
-                carry_out(proposals.on_proposal(&p, std::time::Instant::now(), now_ms));
-            }
-            Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
-            Some(r) = results.recv() => if r.session_id == session {
-                let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                println!("{}", sequence_line(&r, &reason_from_messages(&r, d)));
-                results_seen += 1;
-            },
-            Some(s) = states.recv() => {
-                carry_out(proposals.on_state(&s));
-                if s.session_id != session { continue; }
-                if !s.status.is_empty() && s.status != last_status {
-                    println!("  [{}] {}", phase_name(s.phase), s.status);
-                    last_status = s.status.clone();
-                }
-                match s.phase {
-                    GameState::FINISHED => {
-                        let grace = tokio::time::Instant::now() + LAST_RESULT_GRACE;
-                        while results_seen < usize::from(s.sequence_index) {
-                            match tokio::time::timeout_at(grace, results.recv()).await {
-                                Ok(Some(r)) if r.session_id == session => {
-                                    let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                                    println!("{}", sequence_line(&r, &reason_from_messages(&r, d)));
-                                    results_seen += 1;
-                                }
-                                Ok(Some(_)) => {}
-                                _ => break,
-                            }
-                        }
-                        println!("session {session} finished: {results_seen} sequences");
-                        return Ok(0);
-                    }
-                    GameState::STOPPED | GameState::EMERGENCY_STOPPED => {
-                        println!("session {session} {}", phase_name(s.phase));
-                        return Ok(3);
-                    }
-                    _ => {}
-                }
-            }
-        }
-    }
-}
-
-/// The phase in words (`saying sequence`).
-fn phase_name(phase: u8) -> String {
-    GameState::phase_name(phase).replace('_', " ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn pause(id: u64) -> TherapistCommand {
-        TherapistCommand {
-            command: TherapistCommand::PAUSE,
-            session_id: "s1".into(),
-            command_id: id,
-            ..Default::default()
-        }
-    }
-
-    fn state(session: &str, id: u64, outcome: u8, refusal: &str, status: &str) -> GameState {
-        GameState {
-            command_session_id: session.into(),
-            command_id: id,
-            command_outcome: outcome,
-            command_refusal: refusal.into(),
-            status: status.into(),
-            ..Default::default()
-        }
-    }
-
-    #[test]
-    fn the_answer_is_read_from_the_typed_fields_whatever_the_status_says() {
-        let c = pause(7);
-        // Statuses that name the command, or say "rejected", decide nothing.
-        for status in [
-            "",
-            "rejected command 7 (pause)",
-            "paused (command 7)",
-            "session started",
-        ] {
-            assert_eq!(
-                answer_to(
-                    &c,
-                    &state("s1", 7, GameState::COMMAND_CARRIED_OUT, "", status)
-                ),
-                Some(Answer::CarriedOut)
-            );
-            assert_eq!(
-                answer_to(
-                    &c,
-                    &state(
-                        "s1",
-                        7,
-                        GameState::COMMAND_REFUSED,
-                        "already paused",
-                        status
-                    )
-                ),
-                Some(Answer::Refused("already paused".into()))
-            );
-            assert_eq!(
-                answer_to(
-                    &c,
-                    &state("s1", 6, GameState::COMMAND_CARRIED_OUT, "", status)
-                ),
-                None,
-                "another command's answer"
-            );
-            assert_eq!(
-                answer_to(
-                    &c,
-                    &state("s2", 7, GameState::COMMAND_CARRIED_OUT, "", status)
-                ),
-                None,
-                "the same id in another session"
-            );
-        }
-        assert_eq!(
-            answer_to(
-                &c,
-                &state("s1", 7, GameState::COMMAND_ALREADY_CARRIED_OUT, "x", "")
-            ),
-            Some(Answer::CarriedOut),
-            "a repeat of a command carried out is done"
-        );
-        assert_eq!(
-            answer_to(&c, &state("s1", 7, GameState::COMMAND_NONE, "", "")),
-            None
-        );
-    }
 }

@@ -3,9 +3,10 @@
 //! `--accept-proposals`, an ACCEPT_PROPOSAL for each open proposal, sent again until the game
 //! manager answers it. Sans-IO: the caller prints the lines and publishes the commands.
 
-use crate::{Answer, CONFIRM_WAIT, SENDS, answer_to};
+use crate::console::{Answer, CONFIRM_WAIT, SENDS, answer_to};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::live_line::{proposal_answer, proposal_asked};
+use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, GameState, TherapistCommand};
 use std::time::Instant;
 
@@ -52,8 +53,8 @@ impl Proposals {
         }
     }
 
-    /// A message on the proposal topic. `now_ms`: milliseconds since the epoch, the base of a
-    /// new command id.
+    /// A message on the proposal topic. `now_ms`: milliseconds since the epoch (the caller's
+    /// clock), the base of a new command id and its stamp.
     pub fn on_proposal(&mut self, p: &ActionProposal, now: Instant, now_ms: u64) -> Vec<Event> {
         if p.session_id != self.session {
             return Vec::new();
@@ -68,7 +69,7 @@ impl Proposals {
             events.push(Event::Print(proposed_line(p, again)));
             if self.accept && !self.pending.iter().any(|a| a.step == p.step) {
                 let command = TherapistCommand {
-                    header: node_shell::header_now(),
+                    header: Header::at(Time::from_nanos((now_ms as i64).saturating_mul(1_000_000))),
                     command: TherapistCommand::ACCEPT_PROPOSAL,
                     session_id: self.session.clone(),
                     command_id: now_ms.max(self.last_command_id + 1),
