@@ -22,13 +22,16 @@ pub(crate) fn spawn_signal_listener() -> anyhow::Result<watch::Receiver<bool>> {
     Ok(rx)
 }
 
-/// Resolves when `stop` turns true (or its sender is gone).
+/// Resolves when `stop` turns true. A sender gone without (an in-process node's `NodeStop`
+/// dropped) asks nothing: it never resolves then.
 pub(crate) fn when_stopped(
     stop: &watch::Receiver<bool>,
 ) -> impl std::future::Future<Output = ()> + Send + 'static {
     let mut rx = stop.clone();
     async move {
-        let _ = rx.wait_for(|stop| *stop).await;
+        if rx.wait_for(|stop| *stop).await.is_err() {
+            std::future::pending::<()>().await;
+        }
     }
 }
 

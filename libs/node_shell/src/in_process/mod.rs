@@ -22,7 +22,8 @@
 //! - a service call goes to every server of the name, the first answer wins; with no server,
 //!   or a server gone before it answers, the call runs to its timeout, as over DDS.
 //!
-//! Not modelled: network loss and delay, a writer blocking on a full reliable reader, QoS
+//! For the tests of what a slow link does, [`InProcessBus::delay`] holds what one node takes
+//! from one topic for a while (in order). Not modelled otherwise: network loss and delay, a writer blocking on a full reliable reader, QoS
 //! mismatches (the suite's table gives each topic one QoS: a mismatch here is an error), DDS
 //! Security, and the wire format (the DDS process tests keep those).
 
@@ -68,6 +69,8 @@ struct Graph {
     next_entity: u64,
     topics: BTreeMap<&'static str, topics::TopicEntry>,
     services: BTreeMap<&'static str, services::ServiceEntry>,
+    /// (topic, reading node) -> how long what it takes is held (`InProcessBus::delay`).
+    delays: BTreeMap<(String, String), Duration>,
 }
 
 impl Graph {
@@ -137,6 +140,16 @@ impl InProcessBus {
         let heartbeat = crate::heartbeat::start(&mut node)?;
         node.tasks.push(heartbeat);
         Ok((node, NodeStop(stop_tx)))
+    }
+
+    /// From now on, what `node` takes from `topic` (readers it makes from now) reaches it
+    /// `by` later than it was sent, in the order sent: a slow link or a loaded reader, for the
+    /// tests of what the nodes do then.
+    pub fn delay(&self, topic: &str, node: &str, by: Duration) {
+        self.shared
+            .graph()
+            .delays
+            .insert((topic.to_string(), node.to_string()), by);
     }
 
     /// Best-effort samples a reader lost because it had 10 newer ones waiting.
@@ -313,7 +326,7 @@ impl Bus for InProcessNode {
     where
         M: MessageDefinition + Validate,
     {
-        let (inbox, leave) = topics::add_reader(&self.shared, topic)?;
+        let (inbox, leave) = topics::add_reader(&self.shared, topic, &self.name)?;
         let (tx, rx) = mpsc::channel(capacity.max(1));
         let drops = self.drops.clone();
         let name = topic.name;
@@ -347,7 +360,7 @@ impl Bus for InProcessNode {
         T: Send + 'static,
         F: Fn(Tapped<M>) -> Option<T> + Send + 'static,
     {
-        let (inbox, leave) = topics::add_reader(&self.shared, topic)?;
+        let (inbox, leave) = topics::add_reader(&self.shared, topic, &self.name)?;
         let clock = self.shared.clock;
         let own = self.instance;
         Ok(tokio::spawn(async move {

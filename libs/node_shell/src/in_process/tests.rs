@@ -338,3 +338,58 @@ async fn one_name_one_type_and_one_qos() {
         .to_string();
     assert!(e.contains("transient-local"), "{e}");
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_delayed_reader_gets_what_it_takes_later_in_order_and_the_others_at_once() {
+    let bus = bus();
+    bus.delay(
+        SEQUENCE_RESULT.name,
+        "behaviour_policy",
+        Duration::from_millis(1500),
+    );
+    let (mut game, _) = bus.join("game_manager").expect("joins");
+    let (mut policy, _) = bus.join("behaviour_policy").expect("joins");
+    let (mut recorder, _) = bus.join("bag_recorder").expect("joins");
+    let out = game.publisher(SEQUENCE_RESULT).expect("writer");
+    let mut slow = policy.subscribe(SEQUENCE_RESULT, 16).expect("reader");
+    let mut fast = recorder.subscribe(SEQUENCE_RESULT, 16).expect("reader");
+    out.send(result(1));
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    out.send(result(2));
+    settle().await;
+    assert_eq!(waiting(&mut fast).len(), 2);
+    assert!(waiting(&mut slow).is_empty());
+    tokio::time::sleep(Duration::from_millis(999)).await;
+    settle().await;
+    assert!(waiting(&mut slow).is_empty(), "not before 1.5 s");
+    tokio::time::sleep(Duration::from_millis(1)).await;
+    settle().await;
+    let got: Vec<u8> = waiting(&mut slow)
+        .iter()
+        .map(|m| m.sequence_index)
+        .collect();
+    assert_eq!(got, [1], "1.5 s after the first was sent");
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    settle().await;
+    let got: Vec<u8> = waiting(&mut slow)
+        .iter()
+        .map(|m| m.sequence_index)
+        .collect();
+    assert_eq!(got, [2]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_node_stops_when_asked_and_not_when_no_one_can_ask_any_more() {
+    let bus = bus();
+    let (asked, stop) = bus.join("asked").expect("joins");
+    let (alone, unheld) = bus.join("alone").expect("joins");
+    drop(unheld);
+    let asked = tokio::spawn(asked.shutdown_signal());
+    let alone = tokio::spawn(alone.shutdown_signal());
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    assert!(!asked.is_finished() && !alone.is_finished());
+    stop.stop();
+    asked.await.expect("stopped when asked");
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    assert!(!alone.is_finished(), "a dropped NodeStop is no stop");
+}

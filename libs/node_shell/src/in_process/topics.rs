@@ -8,6 +8,9 @@ use std::any::Any;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio::time::Instant;
 
 /// One message on its way to a reader.
 #[derive(Clone)]
@@ -37,7 +40,39 @@ pub(super) trait AnyTopic: Send {
 
 struct TypedTopic<M> {
     writers: BTreeMap<u64, WriterState<M>>,
-    readers: BTreeMap<u64, Arc<Inbox<Delivery<M>>>>,
+    readers: BTreeMap<u64, Reader<M>>,
+}
+
+/// Where a reader's deliveries go: its inbox, or first a queue that holds each for a while
+/// (`InProcessBus::delay`).
+enum Reader<M> {
+    Now(Arc<Inbox<Delivery<M>>>),
+    Later(mpsc::UnboundedSender<(Instant, Delivery<M>)>, Duration),
+}
+
+impl<M: Send + 'static> Reader<M> {
+    /// Hands `d` over; false when it replaced an older one (best effort).
+    fn deliver(&self, d: Delivery<M>) -> bool {
+        match self {
+            Reader::Now(inbox) => inbox.push(d),
+            Reader::Later(queue, by) => {
+                let _ = queue.send((Instant::now() + *by, d));
+                true
+            }
+        }
+    }
+
+    /// A reader whose deliveries reach `inbox` `by` after they were sent, in order.
+    fn later(inbox: Arc<Inbox<Delivery<M>>>, by: Duration) -> Reader<M> {
+        let (tx, mut rx) = mpsc::unbounded_channel::<(Instant, Delivery<M>)>();
+        tokio::spawn(async move {
+            while let Some((due, d)) = rx.recv().await {
+                tokio::time::sleep_until(due).await;
+                inbox.push(d);
+            }
+        });
+        Reader::Later(tx, by)
+    }
 }
 
 struct WriterState<M> {
@@ -146,23 +181,32 @@ pub(super) fn add_writer<M: MessageDefinition>(
     })
 }
 
-/// A new reader of `topic`: its inbox, holding the kept history of every writer already
-/// there, and what removes it.
+/// A new reader of `topic` for `node`: its inbox, holding the kept history of every writer
+/// already there, and what removes it.
 pub(super) fn add_reader<M: MessageDefinition>(
     shared: &Arc<Shared>,
     topic: Topic<M>,
+    node: &str,
 ) -> anyhow::Result<(Arc<Inbox<Delivery<M>>>, Leave)> {
     let inbox = Inbox::new(reader_depth(topic.qos));
     let id = {
         let mut graph = shared.graph();
         let id = graph.new_entity();
+        let delay = graph
+            .delays
+            .get(&(topic.name.to_string(), node.to_string()))
+            .copied();
+        let reader = match delay {
+            Some(by) => Reader::later(inbox.clone(), by),
+            None => Reader::Now(inbox.clone()),
+        };
         let t = typed(&mut graph.topics, topic)?;
         for w in t.writers.values() {
             for d in &w.history {
-                inbox.push(d.clone());
+                reader.deliver(d.clone());
             }
         }
-        t.readers.insert(id, inbox.clone());
+        t.readers.insert(id, reader);
         id
     };
     shared.changed();
@@ -197,8 +241,8 @@ impl<M: MessageDefinition> Writer<M> {
                 w.history.pop_front();
             }
         }
-        for inbox in t.readers.values() {
-            if !inbox.push(delivery.clone()) {
+        for reader in t.readers.values() {
+            if !reader.deliver(delivery.clone()) {
                 self.shared.replaced.fetch_add(1, Ordering::Relaxed);
             }
         }
