@@ -30,6 +30,8 @@ enum Command {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     match Cli::parse().command {
         Command::Record(args) => record::run(args).await,
         Command::Play(args) => play::run(args).await,

@@ -43,6 +43,8 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     match Cli::parse().command {
         Command::Experiments(a) => commands::experiments::run(a),
         Command::Train(a) => commands::train::run(a),

@@ -14,6 +14,8 @@ struct Cli {
 }
 
 fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     // The node sets up its own logging (stderr and /rosout) in the node shell.
     if let commands::Command::Run(args) = cli.command {

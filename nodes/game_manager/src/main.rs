@@ -35,6 +35,8 @@ struct RunArgs {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let Command::Run(args) = Cli::parse().command;
     let sessions_dir = match &args.sessions_dir {
         Some(dir) => dir.clone(),

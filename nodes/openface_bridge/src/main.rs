@@ -26,6 +26,8 @@ struct Cli {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     let (mut shell, mut params): (NodeShell, OpenFaceBridgeParams) =
         NodeShell::start(NODE, &cli.shell)?;

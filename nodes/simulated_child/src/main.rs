@@ -21,6 +21,8 @@ struct Cli {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     let (mut shell, mut params): (NodeShell, ChildParams) = NodeShell::start(NODE, &cli.shell)?;
     if let Some(c) = cli.cluster {

@@ -40,6 +40,8 @@ fn checked(params: &mut TabletBridgeParams, path: &std::path::Path) -> anyhow::R
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     if cli.check {
         let (mut params, path) = cli.shell.parameters::<TabletBridgeParams>(NODE)?;

@@ -42,9 +42,14 @@ enum Command {
         #[arg(long)]
         accept_proposals: bool,
     },
+    /// Pause the session: the game stands still (the answer's time stops; a sequence cut off
+    /// is said again on resume).
     Pause(SessionArg),
+    /// Resume a paused session.
     Resume(SessionArg),
+    /// End the session now; what was played is saved.
     Stop(SessionArg),
+    /// Silence the robot at once: nothing reaches it again; the session is saved.
     EmergencyStop(SessionArg),
     /// Override the level of the next sequence (1..3).
     Override {
@@ -121,6 +126,8 @@ impl StartArgs {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     let cli = Cli::parse();
     let (mut shell, NoParameters {}) = NodeShell::start(NODE, &cli.shell)?;
     // Every way out, errors included, stops the shell first: its DDS entities go before the

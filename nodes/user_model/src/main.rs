@@ -29,6 +29,8 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
+    // packaging/deb/build.sh asks each program for its manual pages.
+    man_pages::write_if_asked::<Cli>();
     match Cli::parse().command {
         Command::Fit(a) => commands::fit::main(a),
         Command::Predict(a) => commands::predict::main(a),
