@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # The qt-therapy package, end to end, on this Debian machine (as root; it installs, upgrades,
-# removes and purges the package here): its file list and conffiles, the unit, the tablets'
-# certificate made at install, one simulated session run by the installed start script as the
-# qt-therapy user (its pages over HTTPS), the refusal without a PIN, an upgrade and a removal
-# that keep /var/lib/qt-therapy and the certificate, and a purge that deletes them.
+# removes and purges the package here): its file list and conffiles, lintian (Debian's own
+# checker) on it and on its debug symbols, the unit, the tablets' certificate made at install,
+# one simulated session run by the installed start script as the qt-therapy user (its pages
+# over HTTPS), the child's data listed, exported and erased by qt-therapy-data (refused while
+# the session ran), the refusal without a PIN, an upgrade and a removal that keep
+# /var/lib/qt-therapy and the certificate, and a purge that deletes them.
 #   bash tests/package/check.sh        QT_PACKAGE_PROFILE=dev reuses the debug build
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -24,10 +26,15 @@ cleanup() {
 }
 trap cleanup EXIT
 fail() { echo "check.sh: FAILED: $*" >&2; exit 1; }
-step() { echo "== $*"; }
+step() { echo "== $* (at ${SECONDS}s)"; }
 export DEBIAN_FRONTEND=noninteractive
 
-command -v systemd-analyze >/dev/null || { apt-get update -qq && apt-get install -y -qq systemd >/dev/null; }
+need_apt=()
+command -v systemd-analyze >/dev/null || need_apt+=(systemd)
+command -v lintian >/dev/null || need_apt+=(lintian)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  apt-get update -qq && apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
 # It purges at the end: never on a robot whose Q-tables it would delete.
 if dpkg -s qt-therapy >/dev/null 2>&1 || [ -d "$state" ]; then
   if [ "${QT_PACKAGE_CHECK_PURGE:-}" != 1 ]; then
@@ -41,8 +48,10 @@ if dpkg -s qt-therapy >/dev/null 2>&1 || [ -d "$state" ]; then
 fi
 
 step "build (profile $profile)"
-deb1=$(bash packaging/deb/build.sh --profile "$profile" --revision 1 --out "$work/r1" | tail -n 1)
-[ -f "$deb1" ] || fail "no package built"
+bash packaging/deb/build.sh --profile "$profile" --revision 1 --out "$work/r1" | tail -n 2 >"$work/built"
+ddeb1=$(head -n 1 "$work/built")
+deb1=$(tail -n 1 "$work/built")
+[ -f "$deb1" ] && [ -f "$ddeb1" ] || fail "no package built: $(cat "$work/built")"
 
 step "file list and conffiles"
 dpkg-deb -c "$deb1" | awk '{print $6}' | sed 's#^\./#/#; s#/$##' | grep -v '^/\?$' | sort >"$work/files"
@@ -55,19 +64,38 @@ for f in /usr/lib/qt-therapy/start /lib/systemd/system/qt-therapy.service /etc/q
   grep -qx "$f" "$work/files" || fail "$f is not in the package"
 done
 for p in launch game-manager behaviour-policy user-model engagement-classifier tablet-bridge \
-  openface-bridge simulated-child therapist bag report tls; do
+  openface-bridge simulated-child therapist bag report tls data; do
   grep -qx "/usr/bin/qt-therapy-$p" "$work/files" || fail "/usr/bin/qt-therapy-$p is not in the package"
+  grep -qx "/usr/share/man/man1/qt-therapy-$p.1.gz" "$work/files" || fail "qt-therapy-$p has no manual page"
 done
+[ "$(dpkg-deb -c "$deb1" | awk '$6 == "./usr/bin/qt-therapy-data" {print $8}')" = ../lib/qt-therapy/bin/child_data ] ||
+  fail "/usr/bin/qt-therapy-data is not a link to /usr/lib/qt-therapy/bin/child_data"
 for y in params/*.yaml; do
   grep -qx "/etc/qt-therapy/$(basename "$y")" "$work/files" || fail "$y is not packaged"
 done
-outside=$(grep -vE '^/(usr/bin/qt-therapy-[a-z-]+|usr/lib/qt-therapy|usr/share/qt-therapy|usr/share/doc/qt-therapy|etc/qt-therapy|lib/systemd/system/qt-therapy.service)(/|$)' "$work/files" |
-  grep -vxE '/usr|/usr/bin|/usr/lib|/usr/share|/usr/share/doc|/etc|/lib|/lib/systemd|/lib/systemd/system' || true)
+outside=$(grep -vE '^/(usr/bin/qt-therapy-[a-z-]+|usr/lib/qt-therapy|usr/share/qt-therapy|usr/share/doc/qt-therapy|usr/share/man/man1/qt-therapy-[a-z-]+\.1\.gz|usr/share/lintian/overrides/qt-therapy|etc/qt-therapy|lib/systemd/system/qt-therapy.service)(/|$)' "$work/files" |
+  grep -vxE '/usr|/usr/bin|/usr/lib|/usr/share|/usr/share/doc|/usr/share/man|/usr/share/man/man1|/usr/share/lintian|/usr/share/lintian/overrides|/etc|/lib|/lib/systemd|/lib/systemd/system' || true)
 [ -z "$outside" ] || fail "files outside the package's places: $outside"
 dpkg-deb -e "$deb1" "$work/control"
 dpkg-deb -c "$deb1" | awk '$1 ~ /^-/ {print $6}' | sed 's#^\./#/#' | grep '^/etc/' | sort >"$work/etc_files"
 sort "$work/control/conffiles" | diff "$work/etc_files" - || fail "conffiles are not exactly the files under /etc"
 grep -q '^Depends:.*libc6' "$work/control/control" || fail "no libc6 dependency"
+
+step "lintian"
+# Every tag lintian shows fails the check: an error, a warning, and an override that no longer
+# matches anything (packaging/deb/lintian-overrides gives each override its reason).
+for pkg in "$deb1" "$ddeb1"; do
+  set +e
+  lintian --fail-on error,warning "$pkg" >"$work/lintian.out" 2>&1
+  rc=$?
+  set -e
+  grep -v 'running with root privileges' "$work/lintian.out" >"$work/lintian.tags" || true
+  if [ "$rc" != 0 ] || [ -s "$work/lintian.tags" ]; then
+    cat "$work/lintian.tags"
+    fail "lintian on $(basename "$pkg") (exit $rc): fix each tag above or override it with its reason"
+  fi
+done
+echo "lintian: no tags ($(lintian --version))"
 
 step "install"
 installed=1
@@ -80,6 +108,20 @@ getent passwd qt-therapy >/dev/null || fail "no qt-therapy user"
   fail "environment: $(stat -c '%U:%G %a' /etc/qt-therapy/environment)"
 [ -L /etc/systemd/system/multi-user.target.wants/qt-therapy.service ] || fail "the service is not enabled"
 qt-therapy-launch --help >/dev/null || fail "qt-therapy-launch does not run"
+# A manual page as man shows it (where dpkg installs man pages and man is there).
+if [ -f /usr/share/man/man1/qt-therapy-data-erase.1.gz ] && command -v man >/dev/null; then
+  MANWIDTH=200 man -P cat qt-therapy-data-erase 2>/dev/null | grep -q -- '--rewrite-damaged' ||
+    fail "man qt-therapy-data-erase does not show its options"
+fi
+# The debug symbols: one file per program, found by its build id where gdb and Rust's
+# backtraces look.
+dpkg-deb -c "$ddeb1" | awk '{print $6}' >"$work/dbg_files"
+for f in /usr/lib/qt-therapy/bin/*; do
+  id=$(readelf -n "$f" | sed -n 's/^\s*Build ID: *//p')
+  grep -qx "./usr/lib/debug/.build-id/${id:0:2}/${id:2}.debug" "$work/dbg_files" ||
+    fail "qt-therapy-dbgsym has no debug file for $f (build id ${id:-none})"
+  ! readelf -SW "$f" | grep -q -e ' \.symtab ' -e ' \.debug_info ' -e ' \.debug_line ' || fail "$f is not stripped"
+done
 
 step "the tablets' certificate, made at install"
 tls=/etc/qt-therapy/tls
@@ -133,12 +175,32 @@ set -e
 [ "$rc" = 78 ] || { cat "$work/refused.out"; fail "exit $rc with a 2-character PIN, not 78"; }
 grep -q "at least 4 characters" "$work/refused.out" || fail "the refusal does not say why: $(cat "$work/refused.out")"
 
-step "one simulated session by the installed start script"
+step "one simulated session by the installed start script; erasing its child's data is refused meanwhile"
 sed -i 's/^QT_TABLET_PIN=.*/QT_TABLET_PIN=8642/; s/^QT_THERAPY_LAUNCH=.*/QT_THERAPY_LAUNCH=simulated_session/' \
   /etc/qt-therapy/environment
-run_service >"$work/session.out" 2>&1 ||
-  { tail -n 40 "$work/session.out"; fail "the simulated session did not end cleanly"; }
+child=sim-child-1 # simulated_session.launch.yaml's user
+timeout 300 bash "$work/run-service.sh" >"$work/session.out" 2>&1 &
+service=$!
+stop_service() { kill "$service" 2>/dev/null || true; wait "$service" 2>/dev/null || true; }
+# The session's journal is there from its start until the service stops: the session runs.
+for _ in $(seq 1 240); do
+  if ls "$state"/sessions/*/*.journal >/dev/null 2>&1; then break; fi
+  kill -0 "$service" 2>/dev/null || break
+  sleep 0.5
+done
+journal=$(ls "$state"/sessions/*/*.journal 2>/dev/null | head -n 1)
+[ -n "$journal" ] || { stop_service; tail -n 40 "$work/session.out"; fail "no session journal while the service ran"; }
+set +e
+qt-therapy-data erase --user "$child" --yes >"$work/erase-live.out" 2>&1
+rc=$?
+set -e
+[ "$rc" = 4 ] || { stop_service; cat "$work/erase-live.out"; fail "qt-therapy-data erase during the session exited $rc, not 4 (refused)"; }
+grep -q "^refused: session .* of this user is running" "$work/erase-live.out" ||
+  { stop_service; cat "$work/erase-live.out"; fail "the refusal does not say the session runs"; }
+[ -f "$journal" ] || { stop_service; fail "erase refused but $journal is gone"; }
+wait "$service" || { tail -n 40 "$work/session.out"; fail "the simulated session did not end cleanly"; }
 run=$(ls -d "$state"/sessions/*/ | head -n 1)
+run=${run%/}
 [ -s "$run/session.mcap" ] || fail "no bag in $run"
 [ "$(stat -c %U "$run/session.mcap")" = qt-therapy ] || fail "the bag is not the service user's"
 summary=$(ls "$run"/*.summary.json 2>/dev/null | head -n 1)
@@ -149,6 +211,43 @@ grep -q "serving the tablet pages over HTTPS" "$run/logs/tablet_bridge.log" ||
 ls "$run"/q_tables/cluster_*.json >/dev/null || fail "no Q-table learned in $run/q_tables"
 (cd /tmp && qt-therapy-report) >"$work/report.out" || fail "qt-therapy-report"
 grep -q "$run" "$work/report.out" && [ -s "$run/report.html" ] || fail "the report of the last run: $(cat "$work/report.out")"
+
+step "a child's data: qt-therapy-data list, export, erase (the service stopped)"
+session=$(basename "$summary" .summary.json)
+user_files=("$run/$session.jsonl" "$run/$session.journal" "$summary" "$run/session.mcap" "$run/report.html")
+qt-therapy-data list --user "$child" >"$work/list.out" 2>&1 || { cat "$work/list.out"; fail "qt-therapy-data list"; }
+for f in "${user_files[@]}"; do
+  [ -f "$f" ] || fail "no $f after the session"
+  grep -q "^  $f \[" "$work/list.out" || { cat "$work/list.out"; fail "qt-therapy-data list does not name $f"; }
+done
+mkdir "$work/export"
+archive=$work/export/$child.tar.gz
+qt-therapy-data export --user "$child" --output "$archive" >"$work/export.out" 2>&1 ||
+  { cat "$work/export.out"; fail "qt-therapy-data export"; }
+[ "$(stat -c %a "$archive")" = 600 ] || fail "the export archive is mode $(stat -c %a "$archive"), not 600"
+[ "$(tar -tzf "$archive" | head -n 1)" = "child-data-$child/MANIFEST.txt" ] || fail "the archive does not start with its MANIFEST.txt"
+tar -C "$work/export" -xzf "$archive"
+manifest=$work/export/child-data-$child/MANIFEST.txt
+grep -q "holds of user \"$child\"" "$manifest" || fail "the manifest does not name the user: $(head -n 3 "$manifest")"
+for f in "${user_files[@]}"; do
+  grep -q "^    from $f\$" "$manifest" || fail "the manifest does not list $f"
+done
+copy=$(find "$work/export" -name "$(basename "$summary")" | head -n 1)
+[ -n "$copy" ] && cmp -s "$copy" "$summary" || fail "the archive's session summary is not the session's, byte for byte"
+exported_bag=$(find "$work/export" -name '*.mcap' | head -n 1)
+qt-therapy-bag info "$exported_bag" >"$work/bag-info.out" 2>&1 || { cat "$work/bag-info.out"; fail "the exported bag does not read"; }
+set +e
+qt-therapy-data erase --user "$child" --yes >"$work/erase.out" 2>&1
+rc=$?
+set -e
+[ "$rc" = 0 ] || { cat "$work/erase.out"; fail "qt-therapy-data erase exited $rc with the service stopped"; }
+for f in "${user_files[@]}"; do
+  [ ! -e "$f" ] || fail "erase left $f"
+done
+left=$(grep -rlw -- "$child" "$state"; find "$state" -name "*$child*")
+[ -z "$left" ] || fail "files under $state still name $child after erase: $left"
+qt-therapy-data list --user "$child" >"$work/list.out" 2>&1 && grep -q "nothing of this user found" "$work/list.out" ||
+  { cat "$work/list.out"; fail "qt-therapy-data list still finds $child after erase"; }
 
 step "upgrade to revision 2 keeps the state and a changed conffile"
 # A Q-table as the robot would hold it, and a local change to a parameter file.
