@@ -5,7 +5,7 @@
 # conffiles in /etc/qt-therapy, models and launch files in /usr/share/qt-therapy, the systemd
 # unit; and beside it qt-therapy-dbgsym, the programs' debug symbols, as Debian's own builds
 # make them. Lintian accepts both (tests/package/check.sh runs it).
-#   bash packaging/deb/build.sh [--revision N] [--profile release|dev] [--out DIR]
+#   bash packaging/deb/build.sh [--revision N] [--profile release|dev] [--out DIR] [--compression xz|gzip]
 # Prints the path of the .ddeb, then of the .deb. The layout and why: docs/install.md.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -15,17 +15,27 @@ maintainer="QTrobot therapy suite maintainers <maintainers@users.noreply.h-seed-
 
 revision=1
 profile=release
+# The .deb's data: xz as Debian ships (the default), or gzip -1 for a package only made to be
+# checked here: xz took 100 s of CPU per package of the debug build's 146 MB (dpkg-deb 1.21),
+# gzip -1 a few; both are packages dpkg and lintian take alike.
+compression=xz
 out=${CARGO_TARGET_DIR:-target}/deb
 while [ $# -gt 0 ]; do
   case "$1" in
     --revision) revision=$2; shift 2 ;;
     --profile) profile=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    *) echo "build.sh: unknown argument $1 (--revision N, --profile P, --out DIR)" >&2; exit 2 ;;
+    --compression) compression=$2; shift 2 ;;
+    *) echo "build.sh: unknown argument $1 (--revision N, --profile P, --out DIR, --compression C)" >&2; exit 2 ;;
   esac
 done
 out=$(realpath -m "$out")
 case "$revision" in '' | *[!0-9]*) echo "build.sh: --revision $revision is not a number" >&2; exit 2 ;; esac
+case "$compression" in
+  xz) deb_compression=(-Zxz) ;;
+  gzip) deb_compression=(-Zgzip -z1) ;;
+  *) echo "build.sh: --compression $compression is not xz or gzip" >&2; exit 2 ;;
+esac
 
 need_apt=()
 command -v dpkg-deb >/dev/null || need_apt+=(dpkg)
@@ -59,7 +69,14 @@ for p in "${programs[@]}"; do
   read -r crate _ _ <<<"$p"
   [[ " ${packages[*]} " == *" $crate "* ]] || packages+=(-p "$crate")
 done
-cargo build --profile "$profile" --bins "${packages[@]}"
+# The dev profile packages the binaries the tests ran (.ci/run): built as the workspace's
+# build resolves their features (tests/Cargo.toml pins them), so cargo has them already; a
+# build of these packages alone would resolve some features otherwise and build them again.
+if [ "$profile" = dev ]; then
+  cargo build --profile dev --workspace --bins
+else
+  cargo build --profile "$profile" --bins "${packages[@]}"
+fi
 target=${CARGO_TARGET_DIR:-target}
 case "$profile" in dev) bin_dir=$target/debug ;; *) bin_dir=$target/$profile ;; esac
 
@@ -216,7 +233,7 @@ CONTROL
 (cd "$dbg" && find . -path ./DEBIAN -prune -o -type f -print | sed 's#^\./##' | sort |
   xargs md5sum) >"$dbg/DEBIAN/md5sums"
 
-dpkg-deb --root-owner-group -Zxz --build "$root" "$out/$name.deb" >/dev/null
+dpkg-deb --root-owner-group "${deb_compression[@]}" --build "$root" "$out/$name.deb" >/dev/null
 # Its sections are compressed already (--compress-debug-sections): xz would only take time.
 dpkg-deb --root-owner-group -Zxz -z0 --build "$dbg" "$out/$(basename "$dbg").ddeb" >/dev/null
 echo "$out/$(basename "$dbg").ddeb"
