@@ -31,16 +31,58 @@ cargo build --workspace --bins
 # Everything the tests need is installed above, so a test that would skip for want of a
 # network namespace or a browser fails instead: a green run has run every DDS test.
 export QT_REQUIRE_ALL_TESTS=1
-cargo test --workspace
-# The optional DDS Security mode (README, DDS Security): built with its feature, tested apart.
-cargo test -p node_shell --features security --test dds_security
+logs="${CARGO_TARGET_DIR:-target}/test-logs"
+mkdir -p "$logs"
+
+# The Python bag readers' venv, made meanwhile (the network and the disk, not the CPU).
+venv="${CARGO_TARGET_DIR:-target}/bag-check-venv"
+if [ -f tests/bags/check_bag.py ]; then
+  ( [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+    "$venv/bin/python" -m pip install -q -r tests/bags/requirements.txt ) > "$logs/venv.log" 2>&1 &
+  venv_pid=$!
+fi
+
+# Two lanes at once. The cross-node tests (suite_tests: DDS processes in loopback namespaces)
+# mostly wait on their timers and leave the CPU idle, so they run while the other packages'
+# tests compile and run. Their output is prefixed [dds] and [rest]; each lane's log is kept in
+# $logs. Cargo lets go of the target directory while it runs tests, so the second lane only
+# starts compiling once the first is running. The compiling is niced: a DDS test gets the CPU
+# when it needs it (every test passes under load: docs/testing.md, "Tests under load").
+cargo test -p suite_tests --no-run
+( set -o pipefail
+  cargo test -p suite_tests 2>&1 | tee "$logs/dds.log" | sed -u 's/^/[dds] /' ) &
+dds_pid=$!
+while kill -0 "$dds_pid" 2>/dev/null && ! grep -q "Running" "$logs/dds.log" 2>/dev/null; do
+  sleep 1
+done
+rest=0
+( set -o pipefail
+  failed=0
+  nice -n 10 cargo test --workspace --exclude suite_tests --no-run 2>&1 | sed -u 's/^/[rest] /' || failed=1
+  # The optional DDS Security mode (README, DDS Security): built with its feature, tested apart.
+  # --workspace so that every other crate resolves as in the workspace's build: `-p node_shell`
+  # alone resolved tokio's features otherwise and built it and all above it again.
+  nice -n 10 cargo test --workspace --features node_shell/security --test dds_security --no-run 2>&1 |
+    sed -u 's/^/[rest] /' || failed=1
+  cargo test --workspace --exclude suite_tests 2>&1 | tee "$logs/rest.log" | sed -u 's/^/[rest] /' || failed=1
+  cargo test --workspace --features node_shell/security --test dds_security 2>&1 |
+    tee "$logs/security.log" | sed -u 's/^/[rest] /' || failed=1
+  exit "$failed"
+) || rest=$?
+dds=0
+wait "$dds_pid" || dds=$?
 
 # Bags must be readable by the standard Python readers too.
+bags=0
 if [ -f tests/bags/check_bag.py ]; then
-  venv="${CARGO_TARGET_DIR:-target}/bag-check-venv"
-  [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
-  "$venv/bin/python" -m pip install -q -r tests/bags/requirements.txt
-  "$venv/bin/python" tests/bags/check_bag.py
-  # and the committed sample sessions
-  "$venv/bin/python" tests/bags/check_bag.py bags/*.mcap
+  wait "$venv_pid" || { cat "$logs/venv.log"; bags=1; }
+  if [ "$bags" = 0 ]; then
+    "$venv/bin/python" tests/bags/check_bag.py || bags=$?
+    # and the committed sample sessions
+    "$venv/bin/python" tests/bags/check_bag.py bags/*.mcap || bags=$?
+  fi
+fi
+if [ "$dds" != 0 ] || [ "$rest" != 0 ] || [ "$bags" != 0 ]; then
+  echo "tests failed: cross-node (dds) exit $dds, the other packages' (rest) exit $rest, bag readers exit $bags"
+  exit 1
 fi
