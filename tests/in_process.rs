@@ -926,6 +926,10 @@ fn what_arrives_twice_is_taken_once() {
         // The same PAUSE twice, then the same RESUME twice, as a console sending again.
         therapist
             .wait_for_line("seq  2/", Duration::from_secs(600))
+        let mut results_seen =
+            node_shell::Bus::subscribe(&mut probe, SEQUENCE_RESULT, 16).expect("results");
+        let result_again =
+            node_shell::Bus::publisher(&mut probe, SEQUENCE_RESULT).expect("a publisher");
             .await;
         let session = therapist.lines()[0]
             .split(' ')
@@ -957,6 +961,13 @@ fn what_arrives_twice_is_taken_once() {
         }
         let (code, lines) = therapist.exit().await;
         assert_eq!(code, 0, "{}", lines.join("\n"));
+        // The first result delivered again, as a durable topic's history is to a reader that
+        // matches its writer once more: the console, the recorder and every reader of the
+        // bag take it once (session_log, docs/session_log.md).
+        let first_result = results_seen.recv().await.expect("the first result");
+        assert_eq!(first_result.sequence_index, 1);
+        result_again.send(first_result);
+        tokio::time::sleep(Duration::from_millis(100)).await;
         suite.stop_all().await;
         (lines, page_answer, answers)
     });
@@ -986,6 +997,47 @@ fn what_arrives_twice_is_taken_once() {
             (400, GameState::COMMAND_CARRIED_OUT),
             (400, GameState::COMMAND_ALREADY_CARRIED_OUT),
         ]
+    // The console said and counted the result delivered again once.
+    assert_eq!(
+        lines.iter().filter(|l| l.starts_with("seq ")).count(),
+        10,
+        "{context}"
+    );
+    assert!(context.contains("finished: 10 sequences"), "{context}");
+    // The bag holds it twice (the recorder writes what it is sent); each reader takes it once.
+    let bag = out.join("session.mcap");
+    let reader = BagReader::open(&bag).expect("the recorder's bag");
+    assert_eq!(
+        reader
+            .messages::<SequenceResult>(SEQUENCE_RESULT.name)
+            .expect("results")
+            .len(),
+        11
+    );
+    let log = session_log::SessionLog::read(&reader).expect("no conflict");
+    assert_eq!((log.messages.results.len(), log.repeats.len()), (10, 1));
+    let report = session_report::SessionLog::from_bag(&reader, None).expect("the report's log");
+    assert_eq!(
+        report.summary().expect("a summary").tally.sequences,
+        10,
+        "the report's count"
+    );
+    let fitted = user_models::data::bag::read_bag(&bag).expect("the user models' records");
+    assert_eq!(fitted.records.len(), 10, "{:?}", fitted.warnings);
+    assert!(
+        fitted
+            .warnings
+            .iter()
+            .any(|w| w.contains("delivered again")),
+        "{:?}",
+        fitted.warnings
+    );
+    let evaluated = behaviour_policy::recorded::logged_sessions(&log.messages);
+    assert_eq!(
+        evaluated.seen(),
+        1,
+        "one session for the policy's evaluation"
+    );
     );
     let journal = std::fs::read_dir(&out)
         .expect("out")

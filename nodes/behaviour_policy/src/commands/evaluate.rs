@@ -12,8 +12,7 @@ use behaviour_policy::off_policy::{
     Evaluation, Limits, TargetPolicy, TargetTemperature, evaluate, validate,
 };
 use behaviour_policy::recorded::{LeftOut, LeftOutKind, LoggedSessions, logged_sessions};
-use behaviour_policy::{Learning, QTableFile, Reward};
-use qt_therapy_msgs::topics::{DECISION, GAME_STATE, SEQUENCE_RESULT};
+use behaviour_policy::{Learning, QTable, QTableFile, Reward};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -168,41 +167,37 @@ struct BagsRead {
     damaged: Vec<(PathBuf, String)>,
 }
 
-/// The decisions, results and game states of every readable bag. A bag that cannot be read
-/// is named and skipped; a damaged one is read up to the damage, and the damage named.
+/// The decisions, results and game states of every readable bag, taken through the suite's
+/// rule for what arrives twice (`session_log`): a message delivered again is taken once, in a
+/// bag or across bags. A bag that cannot be read, or holds a message that contradicts one
+/// taken before (same identity, other content), is named and skipped; a damaged one is read
+/// up to the damage, and the damage named.
 fn read_bags(files: &[PathBuf]) -> (LoggedSessions, BagsRead) {
-    let mut decisions = Vec::new();
-    let mut results = Vec::new();
-    let mut states = Vec::new();
+    let mut rule = session_log::SessionReader::new();
+    let mut messages = session_log::Messages::default();
     let mut bags = BagsRead::default();
     for f in files {
-        let read = || -> Result<_, bag_file::BagError> {
-            let reader = bag_file::BagReader::open(f)?;
-            let d = reader.topic_messages(DECISION)?;
-            let r = reader.topic_messages(SEQUENCE_RESULT)?;
-            let g = reader.topic_messages(GAME_STATE)?;
-            let damage = match (reader.damage(), reader.is_complete()) {
-                (Some(e), _) => Some(format!(
-                    "{e}; read up to it ({} decisions, {} results), nothing after",
-                    d.len(),
-                    r.len()
-                )),
-                (None, false) => Some(format!(
-                    "{}: not closed cleanly (no footer: the recording was cut off); read to \
-                     its last whole record ({} decisions, {} results)",
-                    reader.name(),
-                    d.len(),
-                    r.len()
-                )),
-                (None, true) => None,
-            };
-            Ok((d, r, g, damage))
-        };
-        match read() {
-            Ok((d, r, g, damage)) => {
-                decisions.extend(d);
-                results.extend(r);
-                states.extend(g);
+        let read = bag_file::BagReader::open(f)
+            .map_err(session_log::SessionLogError::from)
+            .and_then(|reader| rule.read_bag(&reader));
+        match read {
+            Ok(log) => {
+                let (d, r) = (log.messages.decisions.len(), log.messages.results.len());
+                let damage = match (&log.damage, log.complete) {
+                    (Some(e), _) => Some(format!(
+                        "{e}; read up to it ({d} decisions, {r} results), nothing after"
+                    )),
+                    (None, false) => Some(format!(
+                        "{}: not closed cleanly (no footer: the recording was cut off); read to \
+                         its last whole record ({d} decisions, {r} results)",
+                        log.source
+                    )),
+                    (None, true) => None,
+                };
+                if let Some(repeats) = log.repeats_warning() {
+                    tracing::info!("{repeats}");
+                }
+                messages.extend(log.messages);
                 bags.read += 1;
                 if let Some(why) = damage {
                     bags.damaged.push((f.clone(), why));

@@ -105,6 +105,8 @@ impl GameManager {
                 self.current.plan = Some(plan);
                 self.maybe_present(now);
             }
+            // Its time of proposing: one id for every message of this proposal.
+            proposal_id: u64::try_from(now).unwrap_or_default(),
             Some(unsure) => self.propose(plan, unsure, now),
         }
     }
