@@ -901,6 +901,10 @@ fn what_arrives_twice_is_taken_once() {
         let commands =
             node_shell::Bus::publisher(&mut probe, THERAPIST_COMMAND).expect("a publisher");
         let mut states = node_shell::Bus::subscribe(&mut probe, GAME_STATE, 1024).expect("states");
+        let mut results_seen =
+            node_shell::Bus::subscribe(&mut probe, SEQUENCE_RESULT, 16).expect("results");
+        let result_again =
+            node_shell::Bus::publisher(&mut probe, SEQUENCE_RESULT).expect("a publisher");
         let mut answers_seen = answers_seen;
         let mut child = suite.page(tablet_bridge::protocol::Role::Child).await;
         let therapist = suite.run_session(None, false, 1);
@@ -926,16 +930,19 @@ fn what_arrives_twice_is_taken_once() {
         // The same PAUSE twice, then the same RESUME twice, as a console sending again.
         therapist
             .wait_for_line("seq  2/", Duration::from_secs(600))
-        let mut results_seen =
-            node_shell::Bus::subscribe(&mut probe, SEQUENCE_RESULT, 16).expect("results");
-        let result_again =
-            node_shell::Bus::publisher(&mut probe, SEQUENCE_RESULT).expect("a publisher");
             .await;
         let session = therapist.lines()[0]
             .split(' ')
             .nth(1)
             .expect("id")
             .to_string();
+        // The first result delivered again, as a durable topic's history is to a reader that
+        // matches its writer once more: the console, the recorder and every reader of the
+        // bag take it once (session_log, docs/session_log.md).
+        let first_result = results_seen.recv().await.expect("the first result");
+        assert_eq!(first_result.sequence_index, 1);
+        result_again.send(first_result);
+        tokio::time::sleep(Duration::from_millis(100)).await;
         while states.try_recv().is_ok() {}
         let clock = suite.bus.clock();
         let mut ids = Vec::new();
@@ -961,42 +968,10 @@ fn what_arrives_twice_is_taken_once() {
         }
         let (code, lines) = therapist.exit().await;
         assert_eq!(code, 0, "{}", lines.join("\n"));
-        // The first result delivered again, as a durable topic's history is to a reader that
-        // matches its writer once more: the console, the recorder and every reader of the
-        // bag take it once (session_log, docs/session_log.md).
-        let first_result = results_seen.recv().await.expect("the first result");
-        assert_eq!(first_result.sequence_index, 1);
-        result_again.send(first_result);
-        tokio::time::sleep(Duration::from_millis(100)).await;
         suite.stop_all().await;
         (lines, page_answer, answers)
     });
     let context = lines.join("\n");
-    let records = records(&out);
-    assert_eq!(records.len(), 10, "{context}");
-    let first = &records[0]["result"];
-    assert_eq!(
-        first["answer"],
-        serde_json::json!(page_answer),
-        "the first answer is the one scored: {first}"
-    );
-    assert_eq!(first["outcome"], -1);
-    let summary = summary(&out);
-    assert_eq!(
-        summary["rejected_answers"], 1,
-        "the repeat refused: {summary}"
-    );
-    // The two repeats, counted where the summary counts commands not carried out.
-    assert_eq!(summary["rejected_commands"], 2, "{summary}");
-    answers.dedup();
-    assert_eq!(
-        answers,
-        [
-            (0, GameState::COMMAND_CARRIED_OUT),
-            (0, GameState::COMMAND_ALREADY_CARRIED_OUT),
-            (400, GameState::COMMAND_CARRIED_OUT),
-            (400, GameState::COMMAND_ALREADY_CARRIED_OUT),
-        ]
     // The console said and counted the result delivered again once.
     assert_eq!(
         lines.iter().filter(|l| l.starts_with("seq ")).count(),
@@ -1038,6 +1013,31 @@ fn what_arrives_twice_is_taken_once() {
         1,
         "one session for the policy's evaluation"
     );
+    let records = records(&out);
+    assert_eq!(records.len(), 10, "{context}");
+    let first = &records[0]["result"];
+    assert_eq!(
+        first["answer"],
+        serde_json::json!(page_answer),
+        "the first answer is the one scored: {first}"
+    );
+    assert_eq!(first["outcome"], -1);
+    let summary = summary(&out);
+    assert_eq!(
+        summary["rejected_answers"], 1,
+        "the repeat refused: {summary}"
+    );
+    // The two repeats, counted where the summary counts commands not carried out.
+    assert_eq!(summary["rejected_commands"], 2, "{summary}");
+    answers.dedup();
+    assert_eq!(
+        answers,
+        [
+            (0, GameState::COMMAND_CARRIED_OUT),
+            (0, GameState::COMMAND_ALREADY_CARRIED_OUT),
+            (400, GameState::COMMAND_CARRIED_OUT),
+            (400, GameState::COMMAND_ALREADY_CARRIED_OUT),
+        ]
     );
     let journal = std::fs::read_dir(&out)
         .expect("out")

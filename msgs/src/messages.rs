@@ -217,6 +217,7 @@ ros_message! {
     pub struct ActionProposal(PKG, "ActionProposal", include_str!("../msg/ActionProposal.msg")) {
         pub header: Header,
         pub session_id: String,
+        pub proposal_id: u64,
         pub step: u8,
         pub state: BehaviourState,
         pub action: u8,

@@ -374,6 +374,7 @@ fn every_type_round_trips_through_cdr_exactly() {
     round_trip(ActionProposal {
         header: stamp(),
         session_id: "s".into(),
+        proposal_id: 1_700_000_000_123_456_789,
         step: 4,
         state: state(),
         action: 3,

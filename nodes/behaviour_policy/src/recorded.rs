@@ -6,9 +6,10 @@
 
 use crate::messages::transition;
 use crate::off_policy::{LoggedSession, LoggedStep};
-use qt_therapy_msgs::{Decision, GameState, SequenceResult};
+use qt_therapy_msgs::{Decision, SequenceResult};
 use sequence_game::{ACTION_COUNT, Outcome};
 use serde::Serialize;
+use session_log::Messages;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Why a recorded session was left out.
@@ -109,30 +110,30 @@ fn chosen_by<'a>(
 
 /// Pairs each session's results with the policy's decisions (same session, `step` equal to
 /// `sequence_index`; the last decision recorded for a step counts) and the game manager's
-/// fallback flags. Only whole sessions the policy chose throughout are kept.
-pub fn logged_sessions(
-    decisions: &[Decision],
-    results: &[SequenceResult],
-    game_states: &[GameState],
-) -> LoggedSessions {
+/// fallback flags. Only whole sessions the policy chose throughout are kept. `log` is taken
+/// through the suite's rule for what arrives twice (`session_log`): a result delivered again
+/// after a respawn is in it once.
+pub fn logged_sessions(log: &Messages) -> LoggedSessions {
     let mut by_step: BTreeMap<(&str, u8), &Decision> = BTreeMap::new();
-    for d in decisions {
-        by_step.insert((d.session_id.as_str(), d.step), d);
+    for d in &log.decisions {
+        by_step.insert((d.message.session_id.as_str(), d.message.step), &d.message);
     }
-    let fallbacks: BTreeSet<(&str, u8)> = game_states
+    let fallbacks: BTreeSet<(&str, u8)> = log
+        .states
         .iter()
+        .map(|g| &g.message)
         .filter(|g| g.policy_fallback && g.sequence_index > 0)
         .map(|g| (g.session_id.as_str(), g.sequence_index))
         .collect();
-    // Sessions in order of their first result; a result sent again (a respawn) counts once.
+    // Sessions in order of their first result.
     let mut order: Vec<&str> = Vec::new();
     let mut per_session: BTreeMap<&str, BTreeMap<u8, &SequenceResult>> = BTreeMap::new();
-    for r in results {
+    for r in log.results.iter().map(|r| &r.message) {
         let steps = per_session.entry(r.session_id.as_str()).or_insert_with(|| {
             order.push(r.session_id.as_str());
             BTreeMap::new()
         });
-        steps.entry(r.sequence_index).or_insert(r);
+        steps.insert(r.sequence_index, r);
     }
     let mut out = LoggedSessions::default();
     for id in order {
@@ -255,7 +256,8 @@ fn logged_session(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use qt_therapy_msgs::BehaviourState;
+    use bag_file::Stamped;
+    use qt_therapy_msgs::{BehaviourState, GameState};
     use sequence_game::State;
 
     fn played(session: &str, k: u8, planned: u8) -> (Decision, SequenceResult) {
@@ -300,7 +302,7 @@ mod tests {
                 results.push(r);
             }
         }
-        // A result sent again after a respawn counts once.
+        // A result sent again after a respawn counts once (the reader drops it).
         results.push(results[0].clone());
         let (d, mut r) = played("override", 1, 1);
         r.overridden = true;
@@ -338,7 +340,28 @@ mod tests {
                 ..Default::default()
             },
         ];
-        let log = logged_sessions(&decisions, &results, &states);
+        fn stamped<M: Clone>(list: &[M]) -> Vec<Stamped<M>> {
+            list.iter()
+                .enumerate()
+                .map(|(n, m)| Stamped {
+                    log_time: n as u64,
+                    publish_time: 0,
+                    sequence: 0,
+                    message: m.clone(),
+                })
+                .collect()
+        }
+        let messages = |states: &[GameState]| Messages {
+            decisions: stamped(&decisions),
+            results: stamped(&results),
+            states: stamped(states),
+            ..Default::default()
+        };
+        let taken = session_log::SessionReader::new()
+            .take("test", messages(&states))
+            .expect("no conflict");
+        assert_eq!(taken.repeats.len(), 1);
+        let log = logged_sessions(&taken.messages);
         assert_eq!(log.sessions.len(), 1);
         assert_eq!(log.seen(), 6);
         let s = &log.sessions[0];
@@ -371,7 +394,10 @@ mod tests {
         assert!(reasons[4].2.contains("came too late"), "{}", reasons[4].2);
         assert_eq!(log.left_out_for(Fallback), 2);
         // Without the game states the late answer would pass for the policy's.
-        let blind = logged_sessions(&decisions, &results, &[]);
+        let blind = session_log::SessionReader::new()
+            .take("test", messages(&[]))
+            .expect("no conflict");
+        let blind = logged_sessions(&blind.messages);
         assert_eq!(blind.sessions.len(), 2);
     }
 }

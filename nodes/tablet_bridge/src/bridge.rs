@@ -96,6 +96,9 @@ pub struct Bridge {
     pub(crate) session_results: Vec<SequenceResult>,
     /// The newest proposal of the game's session, open or settled.
     pub(crate) proposal: Option<KeptProposal>,
+    /// Every proposal message taken, by the suite's rule for what arrives twice
+    /// (`session_log`): one delivered again must not start its countdown again.
+    pub(crate) proposals_taken: session_log::Once<ActionProposal>,
     /// The session commands go to: the game's, or the one this bridge just started.
     pub(crate) current_session: Option<String>,
     pub(crate) command_ids: CommandIds,
@@ -123,6 +126,7 @@ impl Bridge {
             results: VecDeque::new(),
             session_results: Vec::new(),
             proposal: None,
+            proposals_taken: session_log::Once::new(),
             current_session: None,
             command_ids: CommandIds::default(),
             last_emergency_stop: None,

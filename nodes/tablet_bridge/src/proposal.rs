@@ -6,7 +6,9 @@
 use crate::bridge::{Bridge, Now, Output, log};
 use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage};
 use qt_therapy_msgs::live_line::proposal_status_name;
+use qt_therapy_msgs::topics::ACTION_PROPOSAL;
 use qt_therapy_msgs::{ActionProposal, GameState};
+use session_log::Arrival;
 use std::time::Duration;
 use tracing::Level;
 
@@ -45,6 +47,23 @@ fn older(a: &ActionProposal, b: &GameState) -> bool {
 impl Bridge {
     /// A proposal from the game manager: kept, and sent to the therapist pages.
     pub(crate) fn proposal(&mut self, p: ActionProposal, now: Now, out: &mut Vec<Output>) {
+        match self.proposals_taken.arrive(&p, ACTION_PROPOSAL.name) {
+            Ok(Arrival::New) => {}
+            Ok(Arrival::Repeat) => {
+                out.push(log(
+                    Level::DEBUG,
+                    format!(
+                        "proposal {} for sequence {} delivered again; taken once",
+                        p.proposal_id, p.step
+                    ),
+                ));
+                return;
+            }
+            Err(conflict) => {
+                out.push(log(Level::WARN, format!("{conflict}; the first is kept")));
+                return;
+            }
+        }
         // The topic keeps its history: a bridge (re)started mid-session gets the proposals of
         // earlier sessions too, after or before the game's state. Those older than the state
         // of another session are history; a newer one opens the next session.

@@ -11,6 +11,7 @@ use qt_therapy_msgs::topics::{
     ACTION_PROPOSAL, DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND,
 };
 use qt_therapy_msgs::{ActionProposal, Decision, GameState, SequenceResult, TherapistCommand};
+use session_log::{Arrival, Once};
 use std::time::Duration;
 use tokio::sync::mpsc::Receiver;
 use tokio::time::Instant;
@@ -286,9 +287,8 @@ impl<'a, B: Bus> Console<'a, B> {
         tokio::pin!(deadline);
         let stop = bus.shutdown_signal();
         tokio::pin!(stop);
-        let mut seen: Vec<Decision> = Vec::new();
+        let mut followed = Followed::new(session);
         let mut last_status = String::new();
-        let mut results_seen = 0;
         loop {
             let resend = proposals.next_send();
             // Far enough never to come: the branch is disabled without a send due.
@@ -302,11 +302,9 @@ impl<'a, B: Bus> Console<'a, B> {
                     say(&format!("session {session}: no end within {timeout:?}"));
                     return Ok(2);
                 }
-                Some(d) = decisions.recv() => if d.session_id == session { seen.push(d) },
-                Some(r) = results.recv() => if r.session_id == session {
-                    let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                    say(&sequence_line(&r, &reason_from_messages(&r, d)));
-                    results_seen += 1;
+                Some(d) = decisions.recv() => followed.decision(d),
+                Some(r) = results.recv() => if let Some(line) = followed.result(&r) {
+                    say(&line);
                 },
                 Some(p) = proposal_messages.recv() => {
                     let now_ms = (clock.now_nanos() / 1_000_000).max(1) as u64;
@@ -322,18 +320,18 @@ impl<'a, B: Bus> Console<'a, B> {
                     match s.phase {
                         GameState::FINISHED => {
                             let grace = Instant::now() + LAST_RESULT_GRACE;
-                            while results_seen < usize::from(s.sequence_index) {
+                            while followed.sequences() < usize::from(s.sequence_index) {
                                 match tokio::time::timeout_at(grace, results.recv()).await {
-                                    Ok(Some(r)) if r.session_id == session => {
-                                        let d = seen.iter().rev().find(|d| d.step == r.sequence_index);
-                                        say(&sequence_line(&r, &reason_from_messages(&r, d)));
-                                        results_seen += 1;
-                                    }
-                                    Ok(Some(_)) => {}
+                                    Ok(Some(r)) => if let Some(line) = followed.result(&r) {
+                                        say(&line);
+                                    },
                                     _ => break,
                                 }
                             }
-                            say(&format!("session {session} finished: {results_seen} sequences"));
+                            say(&format!(
+                                "session {session} finished: {} sequences",
+                                followed.sequences()
+                            ));
                             return Ok(0);
                         }
                         GameState::STOPPED | GameState::EMERGENCY_STOPPED => {
@@ -348,6 +346,62 @@ impl<'a, B: Bus> Console<'a, B> {
                 }
             }
         }
+    }
+}
+
+/// The results and decisions of the session `run_session` follows, each taken once by the
+/// suite's rule for what arrives twice (`session_log`, docs/session_log.md): a result the
+/// durable topic delivers again is neither said nor counted again.
+#[derive(Debug)]
+pub struct Followed {
+    session: String,
+    decisions: Vec<Decision>,
+    decisions_taken: Once<Decision>,
+    results: Once<SequenceResult>,
+}
+
+impl Followed {
+    pub fn new(session: &str) -> Followed {
+        Followed {
+            session: session.to_string(),
+            decisions: Vec::new(),
+            decisions_taken: Once::new(),
+            results: Once::new(),
+        }
+    }
+
+    /// A decision on the topic: kept to explain its sequence's result.
+    pub fn decision(&mut self, d: Decision) {
+        if d.session_id == self.session
+            && self.decisions_taken.arrive(&d, DECISION.name) == Ok(Arrival::New)
+        {
+            self.decisions.push(d);
+        }
+    }
+
+    /// A result on the topic: the sequence's line the first time, nothing for a repeat or
+    /// another session's, and what differs for a result that contradicts the first.
+    pub fn result(&mut self, r: &SequenceResult) -> Option<String> {
+        if r.session_id != self.session {
+            return None;
+        }
+        match self.results.arrive(r, SEQUENCE_RESULT.name) {
+            Ok(Arrival::New) => {
+                let d = self
+                    .decisions
+                    .iter()
+                    .rev()
+                    .find(|d| d.step == r.sequence_index);
+                Some(sequence_line(r, &reason_from_messages(r, d)))
+            }
+            Ok(Arrival::Repeat) => None,
+            Err(conflict) => Some(format!("  {conflict}; the first is kept")),
+        }
+    }
+
+    /// Sequences whose result came (each once).
+    pub fn sequences(&self) -> usize {
+        self.results.len()
     }
 }
 
@@ -434,5 +488,40 @@ mod tests {
             answer_to(&c, &state("s1", 7, GameState::COMMAND_NONE, "", "")),
             None
         );
+    }
+
+    #[test]
+    fn a_result_delivered_again_is_said_and_counted_once() {
+        let result = |index: u8, outcome: i8| SequenceResult {
+            session_id: "s1".into(),
+            user_id: "u1".into(),
+            sequence_index: index,
+            level: 1,
+            outcome,
+            sequence: vec!["happy".into(); 3],
+            answer: vec!["happy".into(); 3],
+            ..Default::default()
+        };
+        let mut f = Followed::new("s1");
+        assert!(
+            f.result(&result(1, 1))
+                .is_some_and(|l| l.starts_with("seq "))
+        );
+        // The durable topic's history again (a reader matched once more).
+        assert_eq!(f.result(&result(1, 1)), None);
+        assert!(f.result(&result(2, 1)).is_some());
+        assert_eq!(
+            f.result(&SequenceResult {
+                session_id: "s2".into(),
+                ..result(3, 1)
+            }),
+            None
+        );
+        let conflict = f.result(&result(2, -1)).expect("said");
+        assert!(
+            conflict.contains("arrived twice and differs (outcome: 1 -> -1)"),
+            "{conflict}"
+        );
+        assert_eq!(f.sequences(), 2);
     }
 }

@@ -7,7 +7,9 @@ use crate::console::{Answer, CONFIRM_WAIT, SENDS, answer_to};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::live_line::{proposal_answer, proposal_asked};
 use qt_therapy_msgs::std_msgs::Header;
+use qt_therapy_msgs::topics::ACTION_PROPOSAL;
 use qt_therapy_msgs::{ActionProposal, GameState, TherapistCommand};
+use session_log::{Arrival, Once};
 use std::time::Instant;
 
 /// What the caller must do.
@@ -31,10 +33,13 @@ struct PendingAccept {
 pub struct Proposals {
     session: String,
     accept: bool,
-    /// (step, deadline) of every PROPOSED message seen: the durable topic may hand one over
-    /// twice, and a proposal made again after a pause has a new deadline.
-    seen: Vec<(u8, Time)>,
-    settled: Vec<u8>,
+    /// Every message taken by the suite's rule for what arrives twice (`session_log`): the
+    /// durable topic may hand one over twice; a proposal shown again after a pause has a new
+    /// deadline, so it is new.
+    taken: Once<ActionProposal>,
+    /// Ids of the proposals shown, and of those settled.
+    shown: Vec<u64>,
+    settled: Vec<u64>,
     pending: Vec<PendingAccept>,
     last_command_id: u64,
 }
@@ -46,7 +51,8 @@ impl Proposals {
         Proposals {
             session: session.to_string(),
             accept,
-            seen: Vec::new(),
+            taken: Once::new(),
+            shown: Vec::new(),
             settled: Vec::new(),
             pending: Vec::new(),
             last_command_id,
@@ -60,12 +66,23 @@ impl Proposals {
             return Vec::new();
         }
         let mut events = Vec::new();
-        if p.status == ActionProposal::PROPOSED {
-            if self.settled.contains(&p.step) || self.seen.contains(&(p.step, p.deadline.clone())) {
+        match self.taken.arrive(p, ACTION_PROPOSAL.name) {
+            Ok(Arrival::New) => {}
+            Ok(Arrival::Repeat) => return events,
+            Err(conflict) => {
+                events.push(Event::Print(format!("  {conflict}; the first is kept")));
                 return events;
             }
-            let again = self.seen.iter().any(|(step, _)| *step == p.step);
-            self.seen.push((p.step, p.deadline.clone()));
+        }
+        if p.status == ActionProposal::PROPOSED {
+            // A showing older than the settlement, delivered after it: history.
+            if self.settled.contains(&p.proposal_id) {
+                return events;
+            }
+            let again = self.shown.contains(&p.proposal_id);
+            if !again {
+                self.shown.push(p.proposal_id);
+            }
             events.push(Event::Print(proposed_line(p, again)));
             if self.accept && !self.pending.iter().any(|a| a.step == p.step) {
                 let command = TherapistCommand {
@@ -84,8 +101,8 @@ impl Proposals {
                     next_send: now + CONFIRM_WAIT,
                 });
             }
-        } else if !self.settled.contains(&p.step) {
-            self.settled.push(p.step);
+        } else {
+            self.settled.push(p.proposal_id);
             events.push(Event::Print(settled_line(p)));
         }
         events
@@ -181,6 +198,7 @@ mod tests {
     fn proposal(step: u8, status: u8, deadline: i32) -> ActionProposal {
         ActionProposal {
             session_id: "s1".into(),
+            proposal_id: 1_000 + u64::from(step),
             step,
             action: 3,
             level: 2,

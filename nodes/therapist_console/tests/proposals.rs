@@ -86,6 +86,7 @@ fn proposal(status: u8, accept: Option<&TherapistCommand>) -> ActionProposal {
     checked(ActionProposal {
         header: header_now(),
         session_id: "sim".into(),
+        proposal_id: 1_900_000_000_000_000_000,
         step: 2,
         state: result(2).state,
         action: 3,

@@ -35,6 +35,8 @@ pub struct SessionLog {
     /// Actions proposed to the therapist and their settlement (none in a bag recorded
     /// before supervised autonomy, or with it off).
     pub proposals: Vec<ActionProposal>,
+    /// Messages of the bag delivered again and taken once (every session's).
+    pub repeats: usize,
 }
 
 /// Totals shown at the top of the report.
@@ -107,42 +109,35 @@ impl Proposal<'_> {
 }
 
 impl SessionLog {
-    /// The session's messages from a bag (topics missing from the bag are empty). With
-    /// `session` set, only that session; otherwise the last session in the bag.
+    /// The session's messages from a bag (topics missing from the bag are empty), each
+    /// message delivered again taken once by the suite's rule (`session_log`,
+    /// docs/session_log.md); a message that contradicts an earlier one of the same identity
+    /// is an error naming both. With `session` set, only that session; otherwise the last
+    /// session in the bag.
     pub fn from_bag(
         reader: &bag_file::BagReader,
         session: Option<&str>,
-    ) -> Result<SessionLog, bag_file::BagError> {
-        use qt_therapy_msgs::topics::{
-            ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT,
-        };
-        let results: Vec<SequenceResult> = reader.topic_messages(SEQUENCE_RESULT)?;
+    ) -> Result<SessionLog, session_log::SessionLogError> {
+        let taken = session_log::SessionLog::read(reader)?;
+        let m = taken.messages;
         let wanted = session
             .map(str::to_string)
-            .or_else(|| results.last().map(|r| r.session_id.clone()))
+            .or_else(|| m.last_session().map(str::to_string))
             .unwrap_or_default();
+        fn of<M>(v: Vec<bag_file::Stamped<M>>, keep: impl Fn(&M) -> bool) -> Vec<M> {
+            v.into_iter()
+                .map(|s| s.message)
+                .filter(|m| keep(m))
+                .collect()
+        }
         let mut log = SessionLog {
-            results: results
-                .into_iter()
-                .filter(|r| r.session_id == wanted)
-                .collect(),
-            decisions: reader
-                .topic_messages(DECISION)?
-                .into_iter()
-                .filter(|d| d.session_id == wanted)
-                .collect(),
-            states: reader
-                .topic_messages(GAME_STATE)?
-                .into_iter()
-                .filter(|s| s.session_id == wanted)
-                .collect(),
+            results: of(m.results, |r| r.session_id == wanted),
+            decisions: of(m.decisions, |d| d.session_id == wanted),
+            states: of(m.states, |s| s.session_id == wanted),
             // Absent from bags recorded before supervised autonomy: none then.
-            proposals: reader
-                .topic_messages(ACTION_PROPOSAL)?
-                .into_iter()
-                .filter(|p| p.session_id == wanted)
-                .collect(),
-            engagement: reader.topic_messages(EXPECTED_ENGAGEMENT)?,
+            proposals: of(m.proposals, |p| p.session_id == wanted),
+            engagement: of(m.engagement, |_| true),
+            repeats: taken.repeats.len(),
         };
         // Engagement carries no session id: keep the seconds of this session's time span.
         let start = log.states.first().map(|s| s.header.stamp.to_nanos());
@@ -175,10 +170,11 @@ impl SessionLog {
     }
 
     /// Each (session, step) proposed to the therapist, in the order first proposed. A
-    /// settlement without its PROPOSED message (the bag began after it) stands for both.
+    /// settlement without its PROPOSED message (the bag began after it) stands for both. The
+    /// log's proposals are taken once each (as [`SessionLog::from_bag`] takes them).
     pub fn proposals(&self) -> Vec<Proposal<'_>> {
         let mut out: Vec<Proposal<'_>> = Vec::new();
-        for (i, p) in self.proposals.iter().enumerate() {
+        for p in &self.proposals {
             let at = out
                 .iter()
                 .position(|o| o.session_id() == p.session_id && o.step() == p.step);
@@ -193,17 +189,11 @@ impl SessionLog {
                     out.last_mut().expect("just pushed")
                 }
             };
+            // Each PROPOSED message is a showing of its own: the log holds a message
+            // delivered again once (session_log).
             if p.status == ActionProposal::PROPOSED {
-                // A recorder that joined again gets the durable topic's history once more:
-                // the same proposal (same deadline) is not proposed again.
-                let repeat = self.proposals[..i].iter().any(|q| {
-                    q.status == ActionProposal::PROPOSED
-                        && q.session_id == p.session_id
-                        && q.step == p.step
-                        && q.deadline == p.deadline
-                });
                 entry.proposed = p;
-                entry.times_proposed += usize::from(!repeat);
+                entry.times_proposed += 1;
             } else {
                 entry.settled = Some(p);
             }
@@ -837,6 +827,7 @@ mod tests {
                 nanosec: 0,
             }),
             session_id: "s1".into(),
+            proposal_id: 1_000 + u64::from(step),
             step,
             state: BehaviourState {
                 level: 2,
@@ -913,9 +904,16 @@ mod tests {
             proposal(6, ActionProposal::PROPOSED, 65),
             settled(6, ActionProposal::WITHDRAWN, 0.0, (0, 0)),
         ];
+        // As a bag is read: by the suite's rule for what arrives twice.
+        let mut once = session_log::Once::new();
+        let proposals = proposals
+            .into_iter()
+            .filter(|p| once.arrive(p, "test") == Ok(session_log::Arrival::New))
+            .collect();
         SessionLog {
             results,
             proposals,
+            repeats: once.repeats() as usize,
             ..Default::default()
         }
     }
@@ -1083,13 +1081,17 @@ mod tests {
                 for (k, p) in log.proposals.iter().enumerate() {
                     w.write(topic, 2_000 + k as u64, p).expect("writes");
                 }
+                // A recorder that joined again: the durable topics' history once more.
+                w.write(topic, 3_000, &log.proposals[0]).expect("writes");
+                w.write(results, 3_001, &log.results[0]).expect("writes");
             }
             let bytes = w.finish().expect("finishes").into_inner();
             bag_file::BagReader::from_bytes(&bytes, "t", &bag_file::ReadOptions::default())
                 .expect("reads")
         };
         let log = SessionLog::from_bag(&write(true), None).expect("decodes");
-        assert_eq!(log.proposals.len(), 11, "s1's, not s2's");
+        assert_eq!(log.proposals.len(), 10, "s1's, not s2's, each once");
+        assert_eq!((log.results.len(), log.repeats), (5, 2));
         let t = log.summary().expect("summary").proposals;
         assert_eq!(
             (t.proposed, t.accepted, t.replaced, t.timed_out),

@@ -13,29 +13,25 @@
 //! damaged bag yields the sequences before the damage and a warning naming the bad record.
 
 use super::{DataError, FieldError, InteractionRecord};
-use bag_file::{BagError, BagReader, Stamped};
+use bag_file::{BagReader, Stamped};
 use qt_therapy_msgs::sequence_engagement::EngagementLog;
 use qt_therapy_msgs::topics::{EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT, TABLET_TASK};
-use qt_therapy_msgs::{ExpectedEngagement, GameState, SequenceResult, TabletTask};
+use qt_therapy_msgs::{ExpectedEngagement, SequenceResult};
 use sequence_game::{Feedback, Level, Outcome};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// Records read from bags, and what the reader had to work around (damage, unclosed files).
+/// Records read from bags, and what the reader had to work around (damage, unclosed files,
+/// messages delivered again).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BagRecords {
     pub records: Vec<InteractionRecord>,
     pub warnings: Vec<String>,
 }
 
-/// The messages of one bag the records are made from (the sans-IO input of [`records_from`]).
-#[derive(Debug, Clone, Default)]
-pub struct SessionMessages {
-    pub results: Vec<Stamped<SequenceResult>>,
-    pub tasks: Vec<Stamped<TabletTask>>,
-    pub states: Vec<Stamped<GameState>>,
-    pub engagement: Vec<Stamped<ExpectedEngagement>>,
-}
+/// The messages of one bag the records are made from (the sans-IO input of [`records_from`]),
+/// each taken once by the suite's rule for what arrives twice (`session_log`).
+pub type SessionMessages = session_log::Messages;
 
 /// Whether `path` names a bag file (by its `.mcap` extension).
 pub fn is_bag(path: &Path) -> bool {
@@ -62,20 +58,25 @@ pub fn bags_in(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
     Ok(out)
 }
 
-fn topic<M: qt_therapy_msgs::MessageDefinition>(
-    reader: &BagReader,
-    name: &'static str,
-    why: &'static str,
-) -> Result<Vec<Stamped<M>>, DataError> {
-    match reader.messages::<M>(name) {
-        Err(BagError::NoSuchTopic { bag, .. }) => Err(DataError::MissingTopic {
-            bag,
-            topic: name,
-            why,
-        }),
-        other => other.map_err(DataError::Bag),
-    }
-}
+/// Why user-model data needs each topic it reads.
+const NEEDED: [(&str, &str); 4] = [
+    (
+        SEQUENCE_RESULT.name,
+        "it holds one SequenceResult per solved sequence",
+    ),
+    (
+        TABLET_TASK.name,
+        "its task times end the period the robot talked",
+    ),
+    (
+        GAME_STATE.name,
+        "its first stamp of a session starts that session's first period",
+    ),
+    (
+        EXPECTED_ENGAGEMENT.name,
+        "it holds the per-second engagement",
+    ),
+];
 
 /// Reads the records of one bag.
 pub fn read_bag(path: &Path) -> Result<BagRecords, DataError> {
@@ -83,46 +84,37 @@ pub fn read_bag(path: &Path) -> Result<BagRecords, DataError> {
 }
 
 /// Reads the records of several bags (a user may have played several sessions, each in its
-/// own bag), sorted by user, then time. The same sequence of a session in two bags is an error.
+/// own bag), sorted by user, then time. What arrives twice follows the suite's one rule
+/// (`session_log`, docs/session_log.md), across the bags too: a result delivered again, or a
+/// session in two bags (a bag and its copy), is taken once and named in a warning; the same
+/// sequence with another content is an error naming both.
 pub fn read_bags(paths: &[PathBuf]) -> Result<BagRecords, DataError> {
     let mut out = BagRecords::default();
-    // (user, session, sequence index) -> the bag it was read from: the same sequence twice is
-    // one session recorded (or copied) twice. Session ids alone may repeat across machines.
-    let mut seen: HashMap<(String, String, u8), String> = HashMap::new();
+    let mut rule = session_log::SessionReader::new();
     for path in paths {
         let reader = BagReader::open(path).map_err(DataError::Bag)?;
         let name = reader.name().to_string();
-        let messages = SessionMessages {
-            results: topic(
-                &reader,
-                SEQUENCE_RESULT.name,
-                "it holds one SequenceResult per solved sequence",
-            )?,
-            tasks: topic(
-                &reader,
-                TABLET_TASK.name,
-                "its task times end the period the robot talked",
-            )?,
-            states: topic(
-                &reader,
-                GAME_STATE.name,
-                "its first stamp of a session starts that session's first period",
-            )?,
-            engagement: topic(
-                &reader,
-                EXPECTED_ENGAGEMENT.name,
-                "it holds the per-second engagement",
-            )?,
-        };
+        let log = rule.read_bag(&reader).map_err(|e| match e {
+            session_log::SessionLogError::Bag(e) => DataError::Bag(e),
+            session_log::SessionLogError::Conflict(c) => DataError::Conflict(c),
+        })?;
+        if let Some((topic, why)) = NEEDED.iter().find(|(t, _)| log.missing_topics.contains(t)) {
+            return Err(DataError::MissingTopic {
+                bag: name,
+                topic,
+                why,
+            });
+        }
+        let messages = &log.messages;
         let origin = format!("{name}, topic {}", SEQUENCE_RESULT.name);
-        if let Some(damage) = reader.damage() {
+        if let Some(damage) = &log.damage {
             let warning = format!(
                 "{name} is damaged; using the {} sequence results before the damage: {damage}",
                 messages.results.len()
             );
             tracing::warn!("{warning}");
             out.warnings.push(warning);
-        } else if !reader.is_complete() {
+        } else if !log.complete {
             let warning = format!(
                 "{name} was not closed cleanly (no footer); using its {} sequence results",
                 messages.results.len()
@@ -130,30 +122,17 @@ pub fn read_bags(paths: &[PathBuf]) -> Result<BagRecords, DataError> {
             tracing::warn!("{warning}");
             out.warnings.push(warning);
         }
-        if messages.results.is_empty() {
+        if let Some(warning) = log.repeats_warning() {
+            tracing::warn!("{warning}");
+            out.warnings.push(warning);
+        }
+        if messages.results.is_empty() && log.repeats_on(SEQUENCE_RESULT) == 0 {
             return Err(DataError::NoSequences {
                 bag: name,
                 topic: SEQUENCE_RESULT.name,
             });
         }
-        for (n, r) in messages.results.iter().enumerate() {
-            let key = (
-                r.message.user_id.clone(),
-                r.message.session_id.clone(),
-                r.message.sequence_index,
-            );
-            if let Some(first) = seen.insert(key, name.clone()) {
-                return Err(FieldError::new(
-                    "sequence_index",
-                    format!(
-                        "sequence {} of session {:?} of user {:?} was already read from {first}",
-                        r.message.sequence_index, r.message.session_id, r.message.user_id
-                    ),
-                )
-                .in_record(&origin, n + 1));
-            }
-        }
-        out.records.extend(records_from(&messages, &origin)?);
+        out.records.extend(records_from(messages, &origin)?);
     }
     out.records.sort_by(|a, b| {
         a.user_id

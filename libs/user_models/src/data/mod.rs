@@ -67,6 +67,9 @@ pub enum DataError {
         topic: &'static str,
         why: &'static str,
     },
+    /// The same sequence twice with different contents (docs/session_log.md).
+    #[error(transparent)]
+    Conflict(session_log::Conflict),
     #[error("{bag}: no message on {topic:?}, so no solved sequence to learn from")]
     NoSequences { bag: String, topic: &'static str },
     #[error("{path}: neither a study directory (sequences.csv) nor a directory holding .mcap bags")]

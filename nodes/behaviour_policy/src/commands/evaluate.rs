@@ -12,7 +12,7 @@ use behaviour_policy::off_policy::{
     Evaluation, Limits, TargetPolicy, TargetTemperature, evaluate, validate,
 };
 use behaviour_policy::recorded::{LeftOut, LeftOutKind, LoggedSessions, logged_sessions};
-use behaviour_policy::{Learning, QTable, QTableFile, Reward};
+use behaviour_policy::{Learning, QTableFile, Reward};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -206,7 +206,7 @@ fn read_bags(files: &[PathBuf]) -> (LoggedSessions, BagsRead) {
             Err(e) => bags.skipped.push((f.clone(), e.to_string())),
         }
     }
-    (logged_sessions(&decisions, &results, &states), bags)
+    (logged_sessions(&messages), bags)
 }
 
 /// One estimate as it may be shown: its interval, or why there is none.

@@ -105,8 +105,6 @@ impl GameManager {
                 self.current.plan = Some(plan);
                 self.maybe_present(now);
             }
-            // Its time of proposing: one id for every message of this proposal.
-            proposal_id: u64::try_from(now).unwrap_or_default(),
             Some(unsure) => self.propose(plan, unsure, now),
         }
     }
@@ -119,6 +117,8 @@ impl GameManager {
         let message = ActionProposal {
             header: Header::at(Time::from_nanos(now)),
             session_id: s.id.clone(),
+            // Its time of proposing: one id for every message of this proposal.
+            proposal_id: u64::try_from(now).unwrap_or_default(),
             step: s.index,
             state: BehaviourState::from_state(s.state),
             action: plan.action.index() as u8,

@@ -228,6 +228,12 @@ fn an_unanswered_proposal_plays_when_its_countdown_runs_out() {
     let (timed_out_at, p) = &all[1];
     assert_eq!(*timed_out_at, proposed_at + 5 * S);
     assert_eq!((p.command_id, p.played_action), (0, p.action));
+    // Each proposal has its id, its time of proposing, in all its messages; two proposals
+    // have two (docs/session_log.md).
+    let ids: Vec<u64> = all.iter().map(|(_, p)| p.proposal_id).collect();
+    assert_eq!(ids[0], u64::try_from(proposed_at).expect("after the epoch"));
+    assert_eq!((ids[1], ids[3]), (ids[0], ids[2]));
+    assert!(ids[2] > ids[0]);
     assert!(!r[0].overridden && !r[2].overridden);
     assert!(
         h.records()[2]
@@ -252,11 +258,18 @@ fn a_pause_stops_the_countdown_and_a_stop_withdraws_the_proposal() {
     let (again_at, again) = proposals(&h).pop().expect("shown again");
     assert_eq!(again.status, ActionProposal::PROPOSED);
     assert_eq!(again.deadline.to_nanos(), again_at + 5 * S);
+    // Shown again: the same proposal (its id), a new showing (its deadline).
+    let first = &proposals(&h)[0].1;
+    assert_eq!(again.proposal_id, first.proposal_id);
+    assert_ne!(again.deadline, first.deadline);
     h.run_until(again_at + 4 * S);
     assert_eq!(proposals(&h).len(), 2);
     h.feed(cmd(C::STOP, "s", 4));
     let (_, last) = proposals(&h).pop().expect("withdrawn");
-    assert_eq!(last.status, ActionProposal::WITHDRAWN);
+    assert_eq!(
+        (last.status, last.proposal_id),
+        (ActionProposal::WITHDRAWN, first.proposal_id)
+    );
     assert_eq!(h.results().len(), 1);
     assert_eq!(h.summaries()[0].proposals, 1);
 }

@@ -24,6 +24,7 @@ fn proposal(session: &str, step: u8, status: u8, stamp_ms: i64) -> ActionProposa
     ActionProposal {
         header: Header::at(stamp.clone()),
         session_id: session.into(),
+        proposal_id: u64::from(step),
         step,
         state,
         action: if step == 1 { 0 } else { 1 },
@@ -178,6 +179,44 @@ fn a_pause_stops_the_countdown_until_the_game_goes_on() {
         at(14_000),
     );
     assert!(login_at(&mut b, 14_000).is_empty());
+}
+
+#[test]
+fn a_proposal_delivered_again_does_not_start_its_countdown_again() {
+    // The durable topic hands the bridge the open proposal once more (a reader matched
+    // again): the same message, so the countdown goes on from its first arrival.
+    let (mut b, t, _) = proposing();
+    let out = b.dds(
+        DdsInput::Proposal(proposal("s1", 4, ActionProposal::PROPOSED, 1)),
+        at(3_500),
+    );
+    assert!(proposals(&out, t).is_empty(), "{out:?}");
+    let got = login_at(&mut b, 4_000);
+    assert!(
+        (got[0].remaining - 6.0).abs() < 1e-9,
+        "{}",
+        got[0].remaining
+    );
+    // A settlement delivered again is not shown again either.
+    let settled = proposal("s1", 4, ActionProposal::ACCEPTED, 5_000);
+    assert_eq!(
+        proposals(&b.dds(DdsInput::Proposal(settled.clone()), at(5_000)), t).len(),
+        1
+    );
+    assert!(proposals(&b.dds(DdsInput::Proposal(settled.clone()), at(5_100)), t).is_empty());
+    // Settled another way under the same id: not what happened; the first stays.
+    let out = b.dds(
+        DdsInput::Proposal(ActionProposal {
+            status: ActionProposal::TIMED_OUT,
+            ..settled
+        }),
+        at(5_200),
+    );
+    assert!(proposals(&out, t).is_empty());
+    assert!(
+        format!("{out:?}").contains("arrived twice and differs (status: 1 -> 3"),
+        "{out:?}"
+    );
 }
 
 #[test]
