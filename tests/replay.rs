@@ -444,6 +444,11 @@ impl GameDriver {
         let out = &mut self.out;
         match o {
             Output::Say(s) => out.speech.push((now, s)),
+            // As the topics backend puts it on the wire (the bags were recorded with it).
+            Output::Silence => out.speech.push((
+                now,
+                game_manager::node::robot::SILENCE_ON_SPEECH_TOPIC.into(),
+            )),
             Output::ShowEmotion(s) => out.emotions.push((now, s)),
             Output::PlayGesture(s) => out.gestures.push((now, s)),
             Output::Task(t) => out.tasks.push((now, t)),
@@ -465,6 +470,7 @@ impl GameDriver {
             | Output::Journal(_)
             | Output::Summary(_)
             | Output::LiveLine(_)
+            | Output::Alarm(_)
             | Output::Log { .. } => {}
         }
     }

@@ -213,6 +213,7 @@ impl Dispatch<'_> {
         for o in outputs {
             match o {
                 Output::Say(s) => self.robot.act(Act::Say(s)),
+                Output::Silence => self.robot.act(Act::Silence),
                 Output::ShowEmotion(s) => self.robot.act(Act::Emotion(s)),
                 Output::PlayGesture(s) => self.robot.act(Act::Gesture(s)),
                 Output::AwaitRobot { step } => self.robot.await_step(step),
@@ -279,10 +280,8 @@ impl Dispatch<'_> {
                     ),
                 },
                 // The operator's line, once: a log record (terminal, log file, journal, /rosout).
-                Output::LiveLine(line) => match line.strip_prefix("!! ") {
-                    Some(alarm) => node_shell::logging::log_at(LogLevel::WARN, alarm),
-                    None => node_shell::logging::log_at(LogLevel::INFO, &line),
-                },
+                Output::LiveLine(line) => node_shell::logging::log_at(LogLevel::INFO, &line),
+                Output::Alarm(line) => node_shell::logging::log_at(LogLevel::WARN, &line),
                 Output::Log { level, message } => node_shell::logging::log_at(level, &message),
             }
         }

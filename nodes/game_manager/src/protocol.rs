@@ -44,8 +44,11 @@ pub use tracing::Level as LogLevel;
 /// One thing the core wants done, in order.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Output {
-    /// `/qt_robot/speech/say`; an empty string silences the robot.
+    /// Speech (`/qt_robot/speech/say`, or the robot's say service).
     Say(String),
+    /// Stop speaking at once, cutting short what is being said (the robot's stop or cancel
+    /// service; on the speech topic, the empty utterance: `node::robot`).
+    Silence,
     /// `/qt_robot/emotion/show`, e.g. `QT/happy`.
     ShowEmotion(String),
     /// `/qt_robot/gesture/play`.
@@ -81,10 +84,12 @@ pub enum Output {
     Journal(Box<JournalEntry>),
     /// Write the session summary.
     Summary(Box<SessionSummary>),
-    /// A line for the operator (a session started, each sequence scored, a node lost or back,
-    /// the session's end): logged once, as a warning when it starts with `!! ` (a person is
-    /// needed).
+    /// A line for the operator (a session started, each sequence scored, a node back, the
+    /// session's end): logged once.
     LiveLine(String),
+    /// A line for the operator that needs a person (a node lost, two processes beating as
+    /// one node, the robot did not finish, a session taken over): logged once, as a warning.
+    Alarm(String),
     Log {
         level: LogLevel,
         message: String,
@@ -92,11 +97,11 @@ pub enum Output {
 }
 
 impl Output {
-    /// True for what makes the robot act (speech, face, gesture).
+    /// True for what makes the robot act (speech, silence, face, gesture).
     pub fn is_robot(&self) -> bool {
         matches!(
             self,
-            Output::Say(_) | Output::ShowEmotion(_) | Output::PlayGesture(_)
+            Output::Say(_) | Output::Silence | Output::ShowEmotion(_) | Output::PlayGesture(_)
         )
     }
 }

@@ -117,7 +117,7 @@ impl GameManager {
              sequence {next} next{damaged})",
             r.session_id
         );
-        self.out.push(Output::LiveLine(format!("!! {line}")));
+        self.out.push(Output::Alarm(line));
         self.set_phase(
             Phase::Deciding,
             format!("{RECOVERED_STATUS} (sequence {next}/{planned} next{damaged})"),

@@ -7,8 +7,8 @@
 //! against its call timeout, and whatever was asked before a pause or an emergency stop still
 //! plays after it). There the acts go out one by one, each its own `AwaitRobot`, the next when
 //! the last has returned, in the order the game wants them: the face, the gesture, then the
-//! words. A pause, a stop or a failure drops what was not put out yet; a silence (the empty
-//! utterance, which the shell turns into the gateway's cancel) goes out at once.
+//! words. A pause, a stop or a failure drops what was not put out yet; a silence
+//! (`Output::Silence`, which the shell turns into the gateway's cancel) goes out at once.
 
 use super::{GameManager, Timer};
 use crate::params::RobotBackend;
@@ -129,11 +129,11 @@ impl GameManager {
         }
     }
 
-    /// Silences the robot at once: the empty utterance goes out before anything else, and
+    /// Silences the robot at once: the silence goes out before anything else, and
     /// nothing not yet put out follows it. The step the game waits for (an introduction or a
     /// reaction during a hold) ends when the call under way returns, cut short or not.
     pub(super) fn silence_robot(&mut self, now: i64) {
-        self.out.push(Output::Say(String::new()));
+        self.out.push(Output::Silence);
         if !self.robot.one_at_a_time {
             return;
         }
@@ -242,8 +242,8 @@ impl GameManager {
         };
         if paused {
             self.suspend(now);
-            self.out.push(Output::LiveLine(format!(
-                "!! the robot did not finish ({reason}): session paused; resume to go on"
+            self.out.push(Output::Alarm(format!(
+                "the robot did not finish ({reason}): session paused; resume to go on"
             )));
             self.status = format!("the robot did not finish ({reason}): paused, resume to go on");
             self.publish_state(now);

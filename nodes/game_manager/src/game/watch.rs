@@ -79,8 +79,8 @@ impl GameManager {
             return;
         }
         for t in twins.iter().filter(|t| !self.twins.contains(t)) {
-            self.out.push(Output::LiveLine(format!(
-                "!! two processes beat as node {t}: stop one"
+            self.out.push(Output::Alarm(format!(
+                "two processes beat as node {t}: stop one"
             )));
         }
         let ended: Vec<String> = self
@@ -147,7 +147,7 @@ impl GameManager {
         {
             s.held_since = Some(now);
             if !was_paused {
-                // Silence first: the empty utterance stops the robot mid-sentence.
+                // Silence first: it stops the robot mid-sentence.
                 self.silence_robot(now);
                 self.suspend(now);
             }
@@ -158,12 +158,12 @@ impl GameManager {
             } else {
                 "session paused, robot silent; resume it when the node is back".into()
             };
-            format!("!! node lost: {what}: session paused, robot silent")
+            format!("node lost: {what}: session paused, robot silent")
         } else {
             self.status = "a session cannot start until the node is back".into();
-            format!("!! node lost: {what}")
+            format!("node lost: {what}")
         };
-        self.out.push(Output::LiveLine(line));
+        self.out.push(Output::Alarm(line));
         self.publish_state(now);
     }
 

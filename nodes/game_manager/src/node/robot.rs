@@ -21,10 +21,15 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
+/// What QTrobot's speech topic (`/qt_robot/speech/say`) carries for a silence: it has no
+/// stop of its own, and the empty utterance cuts short what the robot is saying.
+pub const SILENCE_ON_SPEECH_TOPIC: &str = "";
+
 /// One robot act of the core.
 pub enum Act {
-    /// Speech; empty silences the robot.
     Say(String),
+    /// Stop speaking at once.
+    Silence,
     Emotion(String),
     Gesture(String),
 }
@@ -173,6 +178,8 @@ impl Robot {
             } => {
                 let (outbox, data) = match act {
                     Act::Say(s) => (speech, s),
+                    // The one place the core's silence becomes the empty utterance.
+                    Act::Silence => (speech, SILENCE_ON_SPEECH_TOPIC.to_string()),
                     Act::Emotion(s) => (emotion, s),
                     Act::Gesture(s) => (gesture, s),
                 };
@@ -239,7 +246,7 @@ impl RobotServices {
                 emotion,
                 gesture,
             } => match act {
-                Act::Say(message) if message.is_empty() => {
+                Act::Silence => {
                     spawn_call(stop, SpeechStopRequest::default(), timeout, |r| r.status)
                 }
                 Act::Say(message) => {
@@ -264,7 +271,7 @@ impl RobotServices {
                 emotion,
                 gesture,
             } => match act {
-                Act::Say(text) if text.is_empty() => {
+                Act::Silence => {
                     let request = v3::TtsEngineCancelRequest::default();
                     spawn_call(cancel, request, timeout, |r| r.status && r.result)
                 }

@@ -172,17 +172,14 @@ fn an_emergency_stop_silences_the_robot_at_once_and_saves_the_session() {
     let before = h.log.len();
     // Same id as the start: out of order, honoured anyway.
     let out = h.feed(cmd(C::EMERGENCY_STOP, "s", 1));
-    assert_eq!(out.first(), Some(&Output::Say(String::new())));
+    assert_eq!(out.first(), Some(&Output::Silence));
     assert!(
         h.warnings()
             .iter()
             .any(|w| w.contains("honoured for an emergency stop"))
     );
     h.run(3600.0);
-    assert_eq!(
-        h.robot_outputs_since(before),
-        vec![Output::Say(String::new())]
-    );
+    assert_eq!(h.robot_outputs_since(before), vec![Output::Silence]);
     assert!(h.tasks().is_empty() && h.results().is_empty());
     let s = &h.summaries()[0];
     assert_eq!(

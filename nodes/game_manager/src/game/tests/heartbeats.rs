@@ -57,7 +57,7 @@ fn a_lost_node_holds_the_session_silently_until_it_is_back() {
     );
     assert_eq!(
         h.robot_outputs_since(before),
-        vec![Output::Say(String::new())],
+        vec![Output::Silence],
         "silenced at once"
     );
     assert!(
@@ -530,18 +530,15 @@ fn a_node_started_twice_stays_in_the_status_until_one_process_stops() {
             assert!(!status.contains("two processes"), "at {t}: {status}");
         }
     }
-    let lines: Vec<&str> = h
+    let lines: Vec<&Output> = h
         .outputs()
-        .filter_map(|o| match o {
-            Output::LiveLine(l) if l.contains("process") => Some(l.as_str()),
-            _ => None,
-        })
+        .filter(|o| matches!(o, Output::LiveLine(l) | Output::Alarm(l) if l.contains("process")))
         .collect();
     assert_eq!(
         lines,
         vec![
-            format!("!! {twice}").as_str(),
-            "only one process beats as node behaviour_policy again"
+            &Output::Alarm(twice.to_string()),
+            &Output::LiveLine("only one process beats as node behaviour_policy again".into())
         ]
     );
     assert!(h.gm.lost_nodes().is_empty());

@@ -100,7 +100,7 @@ fn a_killed_session_comes_back_paused_and_goes_on_as_if_never_interrupted() {
         restart,
     );
     // Silence first, then the paused session with the reason.
-    assert_eq!(h.log[0].1, Output::Say(String::new()));
+    assert_eq!(h.log[0].1, Output::Silence);
     let s = h.last_state();
     assert_eq!(
         (
@@ -114,7 +114,7 @@ fn a_killed_session_comes_back_paused_and_goes_on_as_if_never_interrupted() {
     assert!(s.status.starts_with(RECOVERED_STATUS), "{}", s.status);
     assert!(
         h.outputs()
-            .any(|o| matches!(o, Output::LiveLine(l) if l.contains("4 of 10 sequences kept")))
+            .any(|o| matches!(o, Output::Alarm(l) if l.contains("4 of 10 sequences kept")))
     );
     // Nothing happens until the therapist resumes: no robot act, no task, no policy call.
     let quiet_from = h.log.len();

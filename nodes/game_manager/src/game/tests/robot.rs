@@ -133,13 +133,13 @@ fn qtrobot_v3() -> GameManagerParams {
 }
 
 /// Every robot call put out, with its time, checking that each `AwaitRobot` follows exactly
-/// one act (the silence, an empty utterance, is not a call anyone waits for).
+/// one act (the silence is not a call anyone waits for).
 fn calls(h: &Harness) -> Vec<(i64, Output)> {
     let mut act: Option<Output> = None;
     let mut out = Vec::new();
     for (t, o) in &h.log {
         match o {
-            Output::Say(s) if s.is_empty() => {}
+            Output::Silence => {}
             Output::Say(_) | Output::ShowEmotion(_) | Output::PlayGesture(_) => {
                 assert!(act.is_none(), "two acts in one call: {act:?}, {o:?}");
                 act = Some(o.clone());
@@ -155,8 +155,10 @@ fn calls(h: &Harness) -> Vec<(i64, Output)> {
 }
 
 fn is_act(o: &Output) -> bool {
-    matches!(o, Output::ShowEmotion(_) | Output::PlayGesture(_))
-        || matches!(o, Output::Say(s) if !s.is_empty())
+    matches!(
+        o,
+        Output::Say(_) | Output::ShowEmotion(_) | Output::PlayGesture(_)
+    )
 }
 
 /// Runs until the first word's face is the call under way; returns when it went out.
@@ -254,7 +256,7 @@ fn the_emergency_stop_silences_a_v3_first_and_asks_it_for_nothing_more() {
     let face_at = until_the_first_words_face(&mut h);
     h.run_until(face_at + ns(0.2));
     let out = h.feed(cmd(C::EMERGENCY_STOP, "v", 2));
-    assert_eq!(out.first(), Some(&Output::Say(String::new())));
+    assert_eq!(out.first(), Some(&Output::Silence));
     let stopped = h.log.len();
     h.run(600.0);
     assert!(
@@ -316,7 +318,7 @@ fn a_v3_cut_short_by_a_hold_is_no_failure_and_the_session_goes_on() {
     h.run_until(T0 + ns(8.9));
     assert_eq!(h.gm.lost_nodes(), vec![POLICY]);
     assert!(
-        h.outputs().any(|o| *o == Output::Say(String::new())),
+        h.outputs().any(|o| *o == Output::Silence),
         "silenced at the loss"
     );
     h.run(3600.0);
