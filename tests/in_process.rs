@@ -870,6 +870,31 @@ fn proposals_are_answered_on_the_therapists_page_or_run_out() {
             p.step
         );
     }
+    // The user models' σ is in every proposal (the game manager reads the shipped models).
+    assert!(
+        settled.iter().all(|p| p.success_std >= 0.0),
+        "a proposal without the user model's σ: {settled:?}"
+    );
+    let reasons: Vec<&str> = records
+        .iter()
+        .map(|r| r["decision_reason"].as_str().unwrap_or_default())
+        .collect();
+    assert!(reasons[0].contains("accepted after 0.3 s"), "{reasons:#?}");
+    assert!(
+        reasons[3].contains("ran out after 1.0 s: played"),
+        "{reasons:#?}"
+    );
+    let summary = summary(&out);
+    assert_eq!(
+        (
+            summary["proposals"].as_u64(),
+            summary["proposals_accepted"].as_u64(),
+            summary["proposals_replaced"].as_u64(),
+            summary["proposals_timed_out"].as_u64()
+        ),
+        (Some(10), Some(1), Some(2), Some(7)),
+        "{summary}"
+    );
     // The console following the session said each proposal and its fate.
     assert!(
         context.contains("proposal for seq 1 accepted after 0.3 s"),

@@ -13,6 +13,24 @@ use crate::model::{
 use sequence_game::{Level, ModelInput, Outcome};
 use std::collections::BTreeMap;
 
+/// What the GPs' noise term is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NoiseModel {
+    /// The paper's: `noise` (1e-10) on every target. The GP passes through each observed
+    /// group's target, so σ is about 0 at every input the data saw, whatever it rests on (one
+    /// sequence or thirty), and large only where the data has nothing.
+    #[default]
+    Fixed,
+    /// Each target is the mean of its group's n sequences, so it gets σ² / n on the diagonal,
+    /// with σ² (the noise of one sequence) maximising the log marginal likelihood beside the
+    /// kernel's hyperparameters. σ of a prediction then says how well the data pin it down.
+    FittedPerSequence,
+}
+
+/// The initial noise variance of one sequence when it is fitted: about a success's variance
+/// p (1 − p) at p = 0.9, or an engagement's spread.
+pub const INITIAL_FITTED_NOISE: f64 = 0.1;
+
 /// How to fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitOptions {
@@ -28,8 +46,10 @@ pub struct FitOptions {
     pub optimise: bool,
     /// Seeded log-uniform starts of the search besides the initial values.
     pub optimiser_restarts: usize,
-    /// Added to the kernel diagonal (scikit-learn's `alpha`).
+    /// Added to the kernel diagonal (scikit-learn's `alpha`) with `NoiseModel::Fixed`.
     pub noise: f64,
+    /// The paper's fixed noise, or a noise fitted per sequence.
+    pub noise_model: NoiseModel,
     /// Bounds of every hyperparameter.
     pub bounds: (f64, f64),
     /// Stored in the file: where the data came from and how it was fitted.
@@ -48,6 +68,7 @@ impl Default for FitOptions {
             optimise: true,
             optimiser_restarts: 0,
             noise: 1e-10,
+            noise_model: NoiseModel::Fixed,
             bounds: (1e-5, 1e5),
             provenance: String::new(),
         }
@@ -94,12 +115,17 @@ pub fn user_vectors(
     Ok(out)
 }
 
-/// The GP training sets of one cluster from its records: (F^p inputs, targets), (F^e inputs,
-/// targets), grouped as the authors group them.
-pub type TrainingSets = ((Vec<Vec<f64>>, Vec<f64>), (Vec<Vec<f64>>, Vec<f64>));
+/// One GP's training set, grouped as the authors group it: per observed group its encoded
+/// input, its target (the group's mean) and how many records it is the mean of.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TrainingSet {
+    pub inputs: Vec<Vec<f64>>,
+    pub targets: Vec<f64>,
+    pub group_sizes: Vec<u32>,
+}
 
-/// The authors' targets for one cluster's records.
-pub fn training_sets(records: &[&InteractionRecord]) -> TrainingSets {
+/// The authors' targets for one cluster's records: F^p's, then F^e's.
+pub fn training_sets(records: &[&InteractionRecord]) -> (TrainingSet, TrainingSet) {
     // Sums and counts per observed group, in table order.
     let mut success: BTreeMap<usize, (ModelInput, f64, f64)> = BTreeMap::new();
     let mut engagement: BTreeMap<usize, (ModelInput, Outcome, f64, f64)> = BTreeMap::new();
@@ -120,16 +146,21 @@ pub fn training_sets(records: &[&InteractionRecord]) -> TrainingSets {
             g.3 += 1.0;
         }
     }
-    let p = success
-        .values()
-        .map(|(input, hits, n)| (encode(*input, None), hits / n))
-        .unzip();
-    let e = engagement
-        .values()
-        .map(|(input, outcome, sum, n)| (encode(*input, Some(*outcome)), sum / n))
+    let mut p = TrainingSet::default();
+    for (input, hits, n) in success.values() {
+        p.inputs.push(encode(*input, None));
+        p.targets.push(hits / n);
+        p.group_sizes.push(*n as u32);
+    }
+    let mut e = TrainingSet::default();
+    for (input, outcome, sum, n) in engagement.values() {
         // The authors keep only groups whose mean engagement is below 1.0.
-        .filter(|(_, m)| *m < 1.0)
-        .unzip();
+        if sum / n < 1.0 {
+            e.inputs.push(encode(*input, Some(*outcome)));
+            e.targets.push(sum / n);
+            e.group_sizes.push(*n as u32);
+        }
+    }
     (p, e)
 }
 
@@ -211,7 +242,7 @@ fn fit_cluster(
         .iter()
         .filter(|r| members.contains(&r.user_id.as_str()))
         .collect();
-    let ((px, py), (ex, ey)) = training_sets(&recs);
+    let (p, e) = training_sets(&recs);
     let member_vectors: Vec<&[f64; 6]> = users
         .iter()
         .filter(|(u, _)| members.contains(&u.as_str()))
@@ -258,14 +289,34 @@ fn fit_cluster(
             source,
         }
     };
+    let component = |set: TrainingSet, seed: u64| match options.noise_model {
+        NoiseModel::Fixed => GpComponent::fit(
+            set.inputs,
+            set.targets,
+            options.kernel,
+            options.noise,
+            optimiser(seed),
+        ),
+        // The noise is a hyperparameter: it is always searched for.
+        NoiseModel::FittedPerSequence => GpComponent::fit_noise_per_sequence(
+            set.inputs,
+            set.targets,
+            set.group_sizes,
+            options.kernel,
+            INITIAL_FITTED_NOISE,
+            OptimiserOptions {
+                bounds: options.bounds,
+                restarts: options.optimiser_restarts,
+                seed,
+            },
+        ),
+    };
     Ok(ClusterModel {
         cluster: k,
         users: members.iter().map(|m| m.to_string()).collect(),
         levels,
-        success: GpComponent::fit(px, py, options.kernel, options.noise, optimiser(seed))
-            .map_err(gp_err("F^p"))?,
-        engagement: GpComponent::fit(ex, ey, options.kernel, options.noise, optimiser(seed + 1))
-            .map_err(gp_err("F^e"))?,
+        success: component(p, seed).map_err(gp_err("F^p"))?,
+        engagement: component(e, seed + 1).map_err(gp_err("F^e"))?,
     })
 }
 
@@ -316,12 +367,12 @@ mod tests {
             r.engagement = Some(if i < 4 { 1.0 } else { 0.25 });
         }
         let refs: Vec<&InteractionRecord> = records.iter().collect();
-        let ((px, py), (ex, ey)) = training_sets(&refs);
-        assert_eq!(px, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0]]);
-        assert_eq!(py, [0.4]);
+        let (p, e) = training_sets(&refs);
+        assert_eq!(p.inputs, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0]]);
+        assert_eq!((p.targets, p.group_sizes), (vec![0.4], vec![10]));
         // The success group has mean engagement 1.0 and is dropped.
-        assert_eq!(ex, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0, -1.0]]);
-        assert_eq!(ey, [0.25]);
+        assert_eq!(e.inputs, [vec![1.0 / 3.0, 1.0, 0.0, 0.0, 0.0, -1.0]]);
+        assert_eq!((e.targets, e.group_sizes), (vec![0.25], vec![6]));
     }
 
     #[test]

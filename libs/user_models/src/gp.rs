@@ -164,6 +164,8 @@ pub enum GpError {
     Hyperparameter { what: &'static str, value: f64 },
     #[error("noise = {0} must be finite and >= 0")]
     Noise(f64),
+    #[error("noise scale of training point {index} = {value} must be finite and > 0")]
+    NoiseScale { index: usize, value: f64 },
     #[error("the kernel matrix is not positive definite (kernel {kernel:?}, noise {noise})")]
     NotPositiveDefinite { kernel: Kernel, noise: f64 },
     #[error("input has {found} dimensions, the GP was trained on {expected}")]
@@ -196,6 +198,9 @@ impl Default for OptimiserOptions {
 pub struct GaussianProcess {
     kernel: Kernel,
     noise: f64,
+    /// Per training point, what multiplies `noise` on the diagonal (1 for every point but in
+    /// [`GaussianProcess::fit_scaled`]: 1 / n for a target that is a mean of n values).
+    noise_scale: Vec<f64>,
     x: Vec<Vec<f64>>,
     /// Lower Cholesky factor of K + noise·I.
     l: DMatrix<f64>,
@@ -207,6 +212,22 @@ pub struct GaussianProcess {
 
 fn sq_dist(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q) * (p - q)).sum()
+}
+
+fn check_scale(x: &[Vec<f64>], scale: &[f64]) -> Result<(), GpError> {
+    if scale.len() != x.len() {
+        return Err(GpError::Shape {
+            inputs: x.len(),
+            targets: scale.len(),
+        });
+    }
+    match scale.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+        Some(i) => Err(GpError::NoiseScale {
+            index: i,
+            value: scale[i],
+        }),
+        None => Ok(()),
+    }
 }
 
 fn check(x: &[Vec<f64>], y: &[f64], noise: f64) -> Result<(), GpError> {
@@ -240,13 +261,22 @@ fn distances(x: &[Vec<f64>]) -> DMatrix<f64> {
     DMatrix::from_fn(x.len(), x.len(), |i, j| sq_dist(&x[i], &x[j]))
 }
 
+/// The noise on the kernel matrix's diagonal: `noise` times each point's scale, and whether
+/// the gradient includes d/d ln(noise) (the noise is then a hyperparameter too, last).
+#[derive(Debug, Clone, Copy)]
+struct Diagonal<'a> {
+    noise: f64,
+    scale: &'a [f64],
+    fitted: bool,
+}
+
 /// The log marginal likelihood and its gradient in log hyperparameters, or `None` where the
 /// kernel matrix is not positive definite (scikit-learn then reports -inf).
 fn lml_and_gradient(
     d2: &DMatrix<f64>,
     y: &DVector<f64>,
     kernel: Kernel,
-    noise: f64,
+    diagonal: Diagonal,
 ) -> Option<(f64, Vec<f64>)> {
     let n = y.len();
     let dims = kernel.theta().len();
@@ -262,7 +292,7 @@ fn lml_and_gradient(
                 m[(j, i)] = gm;
             }
         }
-        k[(j, j)] += noise;
+        k[(j, j)] += diagonal.noise * diagonal.scale.get(j).copied().unwrap_or(1.0);
     }
     let chol = k.cholesky()?;
     let alpha = chol.solve(y);
@@ -270,7 +300,7 @@ fn lml_and_gradient(
     let lml = -0.5 * y.dot(&alpha) - log_det_half - 0.5 * n as f64 * std::f64::consts::TAU.ln();
     // d lml / d theta = 1/2 tr((alpha alpha^T - K^-1) dK/dtheta)
     let inverse = chol.inverse();
-    let gradient = dk
+    let mut gradient: Vec<f64> = dk
         .iter()
         .map(|m| {
             let mut sum = 0.0;
@@ -282,17 +312,41 @@ fn lml_and_gradient(
             0.5 * sum
         })
         .collect();
+    if diagonal.fitted {
+        // dK / d ln(noise) is diagonal: noise times each point's scale.
+        let sum: f64 = (0..n)
+            .map(|i| {
+                let d = diagonal.noise * diagonal.scale.get(i).copied().unwrap_or(1.0);
+                (alpha[i] * alpha[i] - inverse[(i, i)]) * d
+            })
+            .sum();
+        gradient.push(0.5 * sum);
+    }
     Some((lml, gradient))
 }
 
 impl GaussianProcess {
     /// Fits with the kernel's hyperparameters as given.
     pub fn fit(x: Vec<Vec<f64>>, y: &[f64], kernel: Kernel, noise: f64) -> Result<Self, GpError> {
+        let scale = vec![1.0; x.len()];
+        GaussianProcess::fit_scaled(x, y, kernel, noise, scale)
+    }
+
+    /// Fits with the kernel's hyperparameters as given and `noise * noise_scale[i]` on the
+    /// diagonal at point i (scikit-learn's `alpha` given per point).
+    pub fn fit_scaled(
+        x: Vec<Vec<f64>>,
+        y: &[f64],
+        kernel: Kernel,
+        noise: f64,
+        noise_scale: Vec<f64>,
+    ) -> Result<Self, GpError> {
         check(&x, y, noise)?;
+        check_scale(&x, &noise_scale)?;
         kernel.validate()?;
         let n = x.len();
         let k = DMatrix::from_fn(n, n, |i, j| {
-            kernel.eval(sq_dist(&x[i], &x[j])) + if i == j { noise } else { 0.0 }
+            kernel.eval(sq_dist(&x[i], &x[j])) + if i == j { noise * noise_scale[i] } else { 0.0 }
         });
         let chol = k
             .cholesky()
@@ -306,6 +360,7 @@ impl GaussianProcess {
         Ok(GaussianProcess {
             kernel,
             noise,
+            noise_scale,
             x,
             l,
             y: yv,
@@ -323,7 +378,35 @@ impl GaussianProcess {
         noise: f64,
         options: &OptimiserOptions,
     ) -> Result<Self, GpError> {
+        let scale = vec![1.0; x.len()];
+        GaussianProcess::search(x, y, initial, noise, scale, false, options)
+    }
+
+    /// Fits after choosing the kernel's hyperparameters *and* the noise that maximise the log
+    /// marginal likelihood (the noise is searched in log space within the same bounds, from
+    /// `initial_noise`); point i gets `noise * noise_scale[i]` on the diagonal.
+    pub fn fit_optimised_with_noise(
+        x: Vec<Vec<f64>>,
+        y: &[f64],
+        initial: Kernel,
+        initial_noise: f64,
+        noise_scale: Vec<f64>,
+        options: &OptimiserOptions,
+    ) -> Result<Self, GpError> {
+        GaussianProcess::search(x, y, initial, initial_noise, noise_scale, true, options)
+    }
+
+    fn search(
+        x: Vec<Vec<f64>>,
+        y: &[f64],
+        initial: Kernel,
+        noise: f64,
+        noise_scale: Vec<f64>,
+        fit_noise: bool,
+        options: &OptimiserOptions,
+    ) -> Result<Self, GpError> {
         check(&x, y, noise)?;
+        check_scale(&x, &noise_scale)?;
         initial.validate()?;
         let (lo, hi) = options.bounds;
         if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
@@ -332,17 +415,40 @@ impl GaussianProcess {
                 value: lo,
             });
         }
+        if fit_noise && noise <= 0.0 {
+            return Err(GpError::Noise(noise));
+        }
         let (lo, hi) = (lo.ln(), hi.ln());
         let d2 = distances(&x);
         let yv = DVector::from_column_slice(y);
+        let kernel_dims = initial.theta().len();
+        // θ: the kernel's log hyperparameters, then ln(noise) when it is fitted.
+        let split = |theta: &[f64]| -> (Kernel, f64) {
+            let noise = if fit_noise {
+                theta.get(kernel_dims).copied().unwrap_or(0.0).exp()
+            } else {
+                noise
+            };
+            (initial.with_theta(&theta[..kernel_dims]), noise)
+        };
         // Minimised: the negative log marginal likelihood and its gradient.
         let objective = |theta: &[f64]| -> Option<(f64, Vec<f64>)> {
-            lml_and_gradient(&d2, &yv, initial.with_theta(theta), noise)
+            let (kernel, noise) = split(theta);
+            let diagonal = Diagonal {
+                noise,
+                scale: &noise_scale,
+                fitted: fit_noise,
+            };
+            lml_and_gradient(&d2, &yv, kernel, diagonal)
                 .map(|(v, g)| (-v, g.iter().map(|x| -x).collect()))
         };
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
-        let dims = initial.theta().len();
-        let mut starts = vec![initial.theta()];
+        let mut first = initial.theta();
+        if fit_noise {
+            first.push(noise.ln().clamp(lo, hi));
+        }
+        let dims = first.len();
+        let mut starts = vec![first.clone()];
         for _ in 0..options.restarts {
             starts.push((0..dims).map(|_| rng.random_range(lo..hi)).collect());
         }
@@ -354,8 +460,9 @@ impl GaussianProcess {
                 best = Some((value, theta));
             }
         }
-        let theta = best.map_or_else(|| initial.theta(), |b| b.1);
-        GaussianProcess::fit(x, y, initial.with_theta(&theta), noise)
+        let theta = best.map_or(first, |b| b.1);
+        let (kernel, noise) = split(&theta);
+        GaussianProcess::fit_scaled(x, y, kernel, noise, noise_scale)
     }
 
     pub fn kernel(&self) -> Kernel {
@@ -373,8 +480,24 @@ impl GaussianProcess {
     /// The gradient of the log marginal likelihood in log hyperparameters, at this GP's
     /// hyperparameters.
     pub fn log_marginal_likelihood_gradient(&self) -> Vec<f64> {
-        lml_and_gradient(&distances(&self.x), &self.y, self.kernel, self.noise)
+        let diagonal = Diagonal {
+            noise: self.noise,
+            scale: &self.noise_scale,
+            fitted: false,
+        };
+        lml_and_gradient(&distances(&self.x), &self.y, self.kernel, diagonal)
             .map_or_else(|| vec![0.0; self.kernel.theta().len()], |(_, g)| g)
+    }
+
+    /// The gradient with respect to the kernel's log hyperparameters and, last, ln(noise).
+    pub fn log_marginal_likelihood_gradient_with_noise(&self) -> Vec<f64> {
+        let diagonal = Diagonal {
+            noise: self.noise,
+            scale: &self.noise_scale,
+            fitted: true,
+        };
+        lml_and_gradient(&distances(&self.x), &self.y, self.kernel, diagonal)
+            .map_or_else(|| vec![0.0; self.kernel.theta().len() + 1], |(_, g)| g)
     }
 
     pub fn training_inputs(&self) -> &[Vec<f64>] {
@@ -577,13 +700,19 @@ mod tests {
             },
         ] {
             let theta = kernel.theta();
-            let (_, g) = lml_and_gradient(&d2, &yv, kernel, 1e-6).expect("defined");
+            let ones = vec![1.0; x.len()];
+            let fixed = Diagonal {
+                noise: 1e-6,
+                scale: &ones,
+                fitted: false,
+            };
+            let (_, g) = lml_and_gradient(&d2, &yv, kernel, fixed).expect("defined");
             for i in 0..theta.len() {
                 let h = 1e-6;
                 let at = |delta: f64| {
                     let mut t = theta.clone();
                     t[i] += delta;
-                    lml_and_gradient(&d2, &yv, kernel.with_theta(&t), 1e-6)
+                    lml_and_gradient(&d2, &yv, kernel.with_theta(&t), fixed)
                         .expect("defined")
                         .0
                 };
@@ -595,6 +724,84 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_noise_gradient_matches_finite_differences() {
+        let (x, y) = data();
+        let d2 = distances(&x);
+        let yv = DVector::from_column_slice(&y);
+        let scale: Vec<f64> = (0..x.len()).map(|i| 1.0 / (1 + i % 4) as f64).collect();
+        let kernel = Kernel::AUTHORS;
+        let at = |ln_noise: f64| {
+            let d = Diagonal {
+                noise: ln_noise.exp(),
+                scale: &scale,
+                fitted: true,
+            };
+            lml_and_gradient(&d2, &yv, kernel, d).expect("defined")
+        };
+        for ln_noise in [-6.0, -2.0, 0.5] {
+            let (_, g) = at(ln_noise);
+            assert_eq!(g.len(), 3, "two kernel hyperparameters, then the noise");
+            let h = 1e-6;
+            let numeric = (at(ln_noise + h).0 - at(ln_noise - h).0) / (2.0 * h);
+            assert!(
+                (numeric - g[2]).abs() < 1e-4 * numeric.abs().max(1.0),
+                "{numeric} vs {}",
+                g[2]
+            );
+        }
+    }
+
+    #[test]
+    fn a_fitted_noise_finds_the_scatter_of_noisy_means_and_widens_sigma_where_a_mean_rests_on_little()
+     {
+        // Group means of Bernoulli(0.7) draws: most groups of 20, one of a single draw.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let x: Vec<Vec<f64>> = (0..15).map(|i| vec![f64::from(i) / 4.0]).collect();
+        let sizes: Vec<u32> = (0..15).map(|i| if i == 7 { 1 } else { 20 }).collect();
+        let y: Vec<f64> = sizes
+            .iter()
+            .map(|n| {
+                let hits = (0..*n).filter(|_| rng.random::<f64>() < 0.7).count();
+                hits as f64 / f64::from(*n)
+            })
+            .collect();
+        let scale: Vec<f64> = sizes.iter().map(|n| 1.0 / f64::from(*n)).collect();
+        let gp = GaussianProcess::fit_optimised_with_noise(
+            x.clone(),
+            &y,
+            Kernel::AUTHORS,
+            0.1,
+            scale,
+            &OptimiserOptions::default(),
+        )
+        .expect("fits");
+        // The per-draw variance is 0.7 * 0.3 = 0.21; the fit finds it within a factor of 3.
+        assert!((0.07..0.63).contains(&gp.noise()), "noise {}", gp.noise());
+        let g = gp.log_marginal_likelihood_gradient_with_noise();
+        assert!(g.last().is_some_and(|d| d.abs() < 1e-3), "{g:?}");
+        // With that noise and a kernel that ties neighbours loosely (points 1.5 apart), the
+        // group of one draw is not taken at its word: its σ is several times its
+        // neighbours', and its mean is pulled towards them.
+        let apart: Vec<Vec<f64>> = x.iter().map(|v| vec![v[0] * 6.0]).collect();
+        let scale: Vec<f64> = sizes.iter().map(|n| 1.0 / f64::from(*n)).collect();
+        let loose =
+            GaussianProcess::fit_scaled(apart.clone(), &y, Kernel::AUTHORS, gp.noise(), scale)
+                .expect("fits");
+        let (m_one, s_one) = loose.predict(&apart[7]).expect("predicts");
+        let (_, s_many) = loose.predict(&apart[3]).expect("predicts");
+        assert!(s_one > 2.0 * s_many && s_many > 1e-2, "{s_one} vs {s_many}");
+        assert!(
+            (m_one - y[7]).abs() > 0.05,
+            "{m_one} vs the single draw {}",
+            y[7]
+        );
+        // The paper's noise interpolates: σ ≈ 0 at every point, the single draw included.
+        let paper = GaussianProcess::fit(apart.clone(), &y, Kernel::AUTHORS, 1e-10).expect("fits");
+        let (_, s_paper) = paper.predict(&apart[7]).expect("predicts");
+        assert!(s_paper < 1e-3, "{s_paper}");
     }
 
     #[test]

@@ -12,8 +12,9 @@ pub mod fit;
 pub mod gp;
 pub mod model;
 pub mod simulate;
+pub mod supervision;
 
 pub use data::{DataError, InteractionRecord};
-pub use fit::{FitOptions, fit};
+pub use fit::{FitOptions, NoiseModel, fit};
 pub use gp::{GaussianProcess, Kernel, OptimiserOptions};
 pub use model::{UserModelError, UserModelSet};

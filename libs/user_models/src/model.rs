@@ -71,6 +71,11 @@ pub struct GpComponent {
     /// Encoded inputs [L/3, F one-hot (3), PS/3 (, O)], one row per training group.
     pub inputs: Vec<Vec<f64>>,
     pub targets: Vec<f64>,
+    /// With a noise fitted per sequence (`NoiseModel::FittedPerSequence`): how many values
+    /// each target is the mean of; target i then has noise variance `noise / group_sizes[i]`.
+    /// Absent (the paper's fit): `noise` on every target.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group_sizes: Option<Vec<u32>>,
     pub log_marginal_likelihood: f64,
 }
 
@@ -84,6 +89,63 @@ impl GpComponent {
         kernel: Kernel,
         noise: f64,
         optimiser: Option<OptimiserOptions>,
+    ) -> Result<GpComponent, GpError> {
+        let mut c = GpComponent::standardised(inputs, targets, kernel, noise, None)?;
+        let x: Vec<Vec<f64>> = c.inputs.iter().map(|x| c.standardise(x)).collect();
+        let gp = match optimiser {
+            Some(o) => GaussianProcess::fit_optimised(x, &c.targets, kernel, noise, &o),
+            None => GaussianProcess::fit(x, &c.targets, kernel, noise),
+        }?;
+        c.kernel = gp.kernel();
+        c.log_marginal_likelihood = gp.log_marginal_likelihood();
+        Ok(c)
+    }
+
+    /// Fits one GP whose targets are means of `group_sizes` values each: the noise variance
+    /// of one value, σ², is a hyperparameter beside the kernel's (from `initial_noise`), and
+    /// target i gets σ² / n_i on the diagonal. The posterior σ then says how well the data
+    /// pin the value down (few values, or values that disagree: wide), where the paper's
+    /// fixed 1e-10 makes the GP pass through every target (σ ≈ 0 at every input seen).
+    pub fn fit_noise_per_sequence(
+        inputs: Vec<Vec<f64>>,
+        targets: Vec<f64>,
+        group_sizes: Vec<u32>,
+        kernel: Kernel,
+        initial_noise: f64,
+        optimiser: OptimiserOptions,
+    ) -> Result<GpComponent, GpError> {
+        let mut c =
+            GpComponent::standardised(inputs, targets, kernel, initial_noise, Some(group_sizes))?;
+        let x: Vec<Vec<f64>> = c.inputs.iter().map(|x| c.standardise(x)).collect();
+        let gp = GaussianProcess::fit_optimised_with_noise(
+            x,
+            &c.targets,
+            kernel,
+            initial_noise,
+            c.noise_scale(),
+            &optimiser,
+        )?;
+        c.kernel = gp.kernel();
+        c.noise = gp.noise();
+        c.log_marginal_likelihood = gp.log_marginal_likelihood();
+        Ok(c)
+    }
+
+    /// Per target, what multiplies `noise` on the diagonal: 1 / group size, or 1.
+    pub fn noise_scale(&self) -> Vec<f64> {
+        match &self.group_sizes {
+            Some(n) => n.iter().map(|n| 1.0 / f64::from((*n).max(1))).collect(),
+            None => vec![1.0; self.targets.len()],
+        }
+    }
+
+    /// The component before fitting: inputs z-scored as the authors do.
+    fn standardised(
+        inputs: Vec<Vec<f64>>,
+        targets: Vec<f64>,
+        kernel: Kernel,
+        noise: f64,
+        group_sizes: Option<Vec<u32>>,
     ) -> Result<GpComponent, GpError> {
         let d = inputs.first().map_or(0, Vec::len);
         if let Some(index) = inputs.iter().position(|x| x.len() != d) {
@@ -113,23 +175,24 @@ impl GpComponent {
                 (var + 1e-8).sqrt()
             })
             .collect();
-        let mut c = GpComponent {
+        if let Some(n) = &group_sizes
+            && n.len() != targets.len()
+        {
+            return Err(GpError::Shape {
+                inputs: targets.len(),
+                targets: n.len(),
+            });
+        }
+        Ok(GpComponent {
             kernel,
             noise,
             input_mean,
             input_scale,
             inputs,
             targets,
+            group_sizes,
             log_marginal_likelihood: 0.0,
-        };
-        let x: Vec<Vec<f64>> = c.inputs.iter().map(|x| c.standardise(x)).collect();
-        let gp = match optimiser {
-            Some(o) => GaussianProcess::fit_optimised(x, &c.targets, kernel, noise, &o),
-            None => GaussianProcess::fit(x, &c.targets, kernel, noise),
-        }?;
-        c.kernel = gp.kernel();
-        c.log_marginal_likelihood = gp.log_marginal_likelihood();
-        Ok(c)
+        })
     }
 
     pub fn standardise(&self, x: &[f64]) -> Vec<f64> {
@@ -141,11 +204,12 @@ impl GpComponent {
     }
 
     pub fn build(&self) -> Result<GaussianProcess, GpError> {
-        GaussianProcess::fit(
+        GaussianProcess::fit_scaled(
             self.inputs.iter().map(|x| self.standardise(x)).collect(),
             &self.targets,
             self.kernel,
             self.noise,
+            self.noise_scale(),
         )
     }
 }
@@ -363,6 +427,15 @@ impl GpComponent {
             self.targets.len(),
             self.inputs.len(),
         )?;
+        if let Some(n) = &self.group_sizes {
+            length(format!("{field}.group_sizes"), n.len(), self.inputs.len())?;
+            if let Some(i) = n.iter().position(|n| *n == 0) {
+                return Err((
+                    format!("{field}.group_sizes[{i}]"),
+                    "is 0: a target is the mean of at least one value".into(),
+                ));
+            }
+        }
         for (i, x) in self.inputs.iter().enumerate() {
             length(format!("{field}.inputs[{i}]"), x.len(), width)?;
             finite_all(format!("{field}.inputs[{i}]"), x)?;

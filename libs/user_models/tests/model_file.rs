@@ -36,6 +36,60 @@ fn save_then_load_predicts_identically_for_every_kernel() {
 }
 
 #[test]
+fn a_fitted_noise_is_kept_in_the_file_and_bad_group_sizes_are_named() {
+    let records = simulate_study(&StudySpec::default());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = fit(
+        &records,
+        &FitOptions {
+            noise_model: user_models::NoiseModel::FittedPerSequence,
+            ..Default::default()
+        },
+    )
+    .expect("fits");
+    for c in &set.file().clusters {
+        for g in [&c.success, &c.engagement] {
+            let sizes = g.group_sizes.as_ref().expect("group sizes");
+            assert_eq!(sizes.len(), g.targets.len());
+            assert!(sizes.iter().all(|n| *n >= 1));
+            assert!(g.noise > 1e-5 && g.noise < 1.0, "noise {}", g.noise);
+        }
+    }
+    let path = dir.path().join("fitted.json");
+    set.save(&path).expect("saves");
+    let back = UserModelSet::load(&path).expect("loads");
+    assert_eq!(back.file(), set.file());
+    assert_eq!(back.tables(), set.tables());
+    // The paper's fit writes no group sizes: its files stay as they were.
+    let paper = fit(&records, &FitOptions::default()).expect("fits");
+    let paper_path = dir.path().join("paper.json");
+    paper.save(&paper_path).expect("saves");
+    let text = std::fs::read_to_string(&paper_path).expect("reads");
+    assert!(!text.contains("group_sizes"));
+    // A group of no sequences, or sizes that do not match the targets, are named.
+    let text = std::fs::read_to_string(&path).expect("reads");
+    let bad = dir.path().join("bad.json");
+    for (change, field) in [
+        (serde_json::json!([0]), "clusters[0].success.group_sizes"),
+        (
+            serde_json::Value::Null,
+            "clusters[0].success.group_sizes[0]",
+        ),
+    ] {
+        let mut value: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+        let sizes = &mut value["clusters"][0]["success"]["group_sizes"];
+        if change.is_null() {
+            sizes[0] = serde_json::json!(0);
+        } else {
+            *sizes = change;
+        }
+        std::fs::write(&bad, value.to_string()).expect("writes");
+        let e = UserModelSet::load(&bad).expect_err("refused").to_string();
+        assert!(e.contains(&format!("field {field}")), "{e}");
+    }
+}
+
+#[test]
 fn tables_hold_clamped_predictions_with_uncertainty() {
     let set = fit(
         &simulate_study(&StudySpec::default()),

@@ -104,6 +104,70 @@ fn committed_model_is_what_fit_makes_of_the_study() {
 }
 
 #[test]
+fn sigma_of_the_papers_fit_means_never_seen_and_with_a_fitted_noise_how_much_was_seen() {
+    use sequence_game::ModelInput;
+    use user_models::NoiseModel;
+    use user_models::model::encode;
+    let Some(dir) = study() else { return };
+    let records = user_models::data::read_study(&dir).expect("reads the study");
+    let paper = fit(&records, &FitOptions::default()).expect("fits");
+    let fitted = fit(
+        &records,
+        &FitOptions {
+            noise_model: NoiseModel::FittedPerSequence,
+            ..Default::default()
+        },
+    )
+    .expect("fits");
+    // The clustering does not depend on the GPs' noise.
+    assert_eq!(paper.file().users, fitted.file().users);
+    for (k, c) in fitted.file().clusters.iter().enumerate() {
+        let sizes = c.success.group_sizes.as_ref().expect("group sizes kept");
+        // A Bernoulli's variance is at most 0.25; the study's success rates are about 0.8.
+        assert!(
+            (0.02..0.25).contains(&c.success.noise),
+            "{}",
+            c.success.noise
+        );
+        let (mut once, mut often) = (Vec::new(), Vec::new());
+        for input in ModelInput::all() {
+            let seen = c
+                .success
+                .inputs
+                .iter()
+                .position(|x| *x == encode(input, None))
+                .map_or(0, |i| sizes[i]);
+            let p = paper.tables()[k].success(input).std;
+            let f = fitted.tables()[k].success(input).std;
+            // The paper's σ: about 0 wherever the study has a group, one sequence or thirty.
+            if seen > 0 {
+                assert!(
+                    p < 1e-3,
+                    "cluster {k} {input:?}: σ {p} with {seen} sequence(s)"
+                );
+            } else {
+                assert!(p > 0.2, "cluster {k} {input:?}: σ {p}, never seen");
+            }
+            // The fitted noise's σ: never 0, never the prior's 1.
+            assert!((0.03..0.3).contains(&f), "cluster {k} {input:?}: σ {f}");
+            match seen {
+                1 => once.push(f),
+                n if n >= 5 => often.push(f),
+                _ => {}
+            }
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        assert!(!once.is_empty() && !often.is_empty());
+        assert!(
+            mean(&once) > mean(&often) + 0.02,
+            "cluster {k}: σ {} where one sequence was seen, {} where five or more",
+            mean(&once),
+            mean(&often)
+        );
+    }
+}
+
+#[test]
 fn recorded_session_bags_give_the_game_managers_engagement() {
     use qt_therapy_msgs::SequenceResult;
     use qt_therapy_msgs::topics::SEQUENCE_RESULT;

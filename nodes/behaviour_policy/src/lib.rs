@@ -28,6 +28,7 @@ pub mod report;
 pub mod simulation;
 pub mod softmax_cache;
 pub mod stats;
+pub mod supervision;
 
 pub use cluster_policies::{ClusterPolicies, OwnedTable, ServeError};
 pub use learning::{Learning, Mode, QTable, Reward, TemperatureSchedule};

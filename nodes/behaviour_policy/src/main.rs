@@ -4,6 +4,7 @@
 //!   behaviour_policy show-q-table out/q_tables/cluster_0.json
 //!   behaviour_policy evaluate --bags bags --q-table NEW.json  (judge a policy on old sessions)
 //!   behaviour_policy per-child                               (leave-one-child-out adaptation)
+//!   behaviour_policy supervision                             (supervised autonomy's rules, measured)
 //!   behaviour_policy run                                     (the DDS decision node)
 
 mod commands;
@@ -35,6 +36,10 @@ enum Command {
     /// per-user table started from it, a table learned from scratch on the child and the
     /// optimal policy for the child's model, on the same draws, child by child.
     PerChild(commands::per_child::Args),
+    /// Supervised autonomy's proposal rules on the study's children, leave one child out:
+    /// proposals per session and the score a therapist who knows the child protects, against
+    /// the policy alone and proposals at random at the same rate, paired by child.
+    Supervision(commands::supervision::Args),
     /// Run the decision node over DDS.
     Run {
         #[command(flatten)]
@@ -52,6 +57,7 @@ fn main() -> anyhow::Result<()> {
         Command::Evaluate(a) => commands::evaluate::run(a),
         Command::EvaluateInSimulation(a) => commands::evaluate::run_in_simulation(a),
         Command::PerChild(a) => commands::per_child::run(a),
+        Command::Supervision(a) => commands::supervision::run(a),
         Command::Run { shell } => tokio::runtime::Builder::new_multi_thread()
             .enable_all()
             .build()?

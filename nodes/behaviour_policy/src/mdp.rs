@@ -40,7 +40,7 @@ fn draw(probabilities: &[f64; ACTION_COUNT], u: f64) -> usize {
 
 /// A simulated child's answer to a sequence, for a uniform `u`: right iff `u <= F^p(L, F, PS)`,
 /// engagement F^e(L, F, PS, O) (the means, as the policy's simulation uses them).
-fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) -> (Outcome, f64) {
+pub(crate) fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) -> (Outcome, f64) {
     let outcome = Outcome::from_correct(answers_right(u, model.success(input).mean));
     (
         outcome,
@@ -49,7 +49,11 @@ fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) -> (Outcome, 
 }
 
 /// The model input of the sequence `action` sets up from `state`, and the state after it.
-fn transition(state: State, action: Action, outcome: Outcome) -> Option<(ModelInput, State)> {
+pub(crate) fn transition(
+    state: State,
+    action: Action,
+    outcome: Outcome,
+) -> Option<(ModelInput, State)> {
     let (level, feedback) = action.apply(state)?;
     let input = ModelInput {
         level,

@@ -97,6 +97,23 @@ mod tests {
     }
 
     #[test]
+    fn an_exploring_decision_is_published_with_its_probabilities_and_not_as_exploitation() {
+        use crate::{Learning, PolicyCore, QTable};
+        let mut table = QTable::default();
+        let s = State::new(2, 0, 2).expect("state");
+        table.q[s.index()] = [0.0, 1.0, 0.0, 0.5, 0.0];
+        for (mode, exploitation_only) in [(Mode::Exploit, true), (Mode::EpsilonGreedy(0.2), false)]
+        {
+            let mut core = PolicyCore::new(table.clone(), Learning::default(), mode, 3, 0);
+            let d = core.decide(s, 3).expect("decides");
+            let m = decision_message(&d, Header::default(), "s-1", "cluster 0".into());
+            assert_eq!(m.exploitation_only, exploitation_only);
+            assert_eq!(m.probabilities, d.probabilities.to_vec());
+            assert_eq!(m.explored, d.explored);
+        }
+    }
+
+    #[test]
     fn the_last_sequence_of_a_shorter_session_is_terminal() {
         let r = |sequence_index| SequenceResult {
             sequence_index,

@@ -2,7 +2,7 @@
 //! defaults are the authors' constants, so the yaml, this struct and `Learning::default()`
 //! say the same thing (a test holds them together).
 
-use crate::learning::{Learning, Mode, Reward, TemperatureSchedule};
+use crate::learning::{Learning, MAX_EPSILON, Mode, Reward, TemperatureSchedule};
 
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -14,6 +14,9 @@ pub struct BehaviourPolicyParams {
     pub pretrain_runs: i64,
     pub pretrain_state_lags_result: bool,
     pub exploitation_only: bool,
+    /// With `exploitation_only`: the share ε of decisions drawn uniformly from the allowed
+    /// actions instead of greedily (0: greedy, the default; at most `MAX_EPSILON`).
+    pub exploration_epsilon: f64,
     pub seed: i64,
     pub default_cluster: i64,
     pub reward: String,
@@ -40,6 +43,7 @@ impl Default for BehaviourPolicyParams {
             pretrain_runs: 5,
             pretrain_state_lags_result: false,
             exploitation_only: true,
+            exploration_epsilon: 0.0,
             seed: 7,
             default_cluster: 0,
             reward: Reward::RePlusBetaE.name().into(),
@@ -94,15 +98,42 @@ impl BehaviourPolicyParams {
             reward,
         };
         validate_learning(&learning)?;
+        // Checked with the constants, at start-up: how actions are picked is as much part of
+        // what the node was asked to do.
+        self.exploration()?;
         Ok(learning)
     }
 
+    /// How actions are picked, checked: softmax (`exploitation_only: false`), greedy, or
+    /// greedy with logged exploration (`exploration_epsilon` above 0).
+    pub fn exploration(&self) -> Result<Mode, ParamError> {
+        let e = self.exploration_epsilon;
+        check(
+            "exploration_epsilon",
+            e.is_finite() && (0.0..=MAX_EPSILON).contains(&e),
+            || format!("{e} is not in [0, {MAX_EPSILON}]"),
+        )?;
+        check(
+            "exploration_epsilon",
+            e == 0.0 || self.exploitation_only,
+            || {
+                format!(
+                    "{e} needs exploitation_only: true (the softmax explores by itself; ε \
+                     explores around the greedy choice)"
+                )
+            },
+        )?;
+        Ok(match (self.exploitation_only, e > 0.0) {
+            (false, _) => Mode::Explore,
+            (true, false) => Mode::Exploit,
+            (true, true) => Mode::EpsilonGreedy(e),
+        })
+    }
+
+    /// [`Self::exploration`], once [`Self::learning`] has checked it (as the node does at
+    /// start-up); a value that fails the check gives the greedy mode.
     pub fn mode(&self) -> Mode {
-        if self.exploitation_only {
-            Mode::Exploit
-        } else {
-            Mode::Explore
-        }
+        self.exploration().unwrap_or(Mode::Exploit)
     }
 
     pub fn seed(&self) -> u64 {
@@ -226,5 +257,31 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(p.pretraining().expect_err("runs").key, "pretrain_runs");
+    }
+
+    #[test]
+    fn exploration_is_off_by_default_bounded_and_only_around_the_greedy_choice() {
+        let p = BehaviourPolicyParams::default();
+        assert_eq!(p.exploration(), Ok(Mode::Exploit));
+        assert_eq!(p.mode(), Mode::Exploit);
+        let with = |exploitation_only, exploration_epsilon| BehaviourPolicyParams {
+            exploitation_only,
+            exploration_epsilon,
+            ..Default::default()
+        };
+        assert_eq!(with(true, 0.1).exploration(), Ok(Mode::EpsilonGreedy(0.1)));
+        assert_eq!(with(true, 0.1).mode(), Mode::EpsilonGreedy(0.1));
+        assert_eq!(with(false, 0.0).exploration(), Ok(Mode::Explore));
+        for (p, words) in [
+            (with(true, MAX_EPSILON + 0.01), "is not in [0, 0.3]"),
+            (with(true, -0.1), "is not in [0, 0.3]"),
+            (with(true, f64::NAN), "is not in [0, 0.3]"),
+            (with(false, 0.1), "needs exploitation_only: true"),
+        ] {
+            let e = p.learning().expect_err("refused at start-up");
+            assert_eq!(e.key, "exploration_epsilon");
+            assert!(e.to_string().contains(words), "{e}");
+            assert_eq!(p.mode(), Mode::Exploit, "never explores on a refused value");
+        }
     }
 }

@@ -124,7 +124,7 @@ pub fn cases(
 }
 
 /// A seed from the master seed and a path of indices, independent of thread order.
-fn seed_of(master: u64, path: &[u64]) -> u64 {
+pub(crate) fn seed_of(master: u64, path: &[u64]) -> u64 {
     path.iter()
         .fold(splitmix64(master), |s, &i| splitmix64(s ^ i))
 }
@@ -182,26 +182,42 @@ pub struct ChildResult {
 
 /// The random numbers of session `session` of repetition `seed` of child `index`: the same
 /// for every policy.
-fn session_draws(spec: &StudySpec, index: usize, seed: usize, session: usize) -> SessionDraws {
+pub(crate) fn session_draws(
+    spec: &StudySpec,
+    index: usize,
+    seed: usize,
+    session: usize,
+) -> SessionDraws {
     SessionDraws::new(seed_of(
         spec.seed,
         &[index as u64, 2, seed as u64, session as u64],
     ))
 }
 
-/// Plays `spec.sessions` sessions per policy and seed against the child's own model.
-pub fn run_child(case: &ChildCase, index: usize, spec: &StudySpec) -> ChildResult {
-    let live = SessionSettings {
+/// The live state convention and the softmax the node pretrains with.
+fn live_settings(spec: &StudySpec) -> SessionSettings {
+    SessionSettings {
         learning: spec.learning,
         mode: Mode::Explore,
         state_lags_result: false,
-    };
-    let cluster_table = pretrain(
+    }
+}
+
+/// The child's cluster's table as the node pretrains it against the cluster's model (what
+/// the child meets as the cluster policy).
+pub fn cluster_table(case: &ChildCase, index: usize, spec: &StudySpec) -> QTable {
+    pretrain(
         &case.cluster_model,
         spec,
-        &live,
+        &live_settings(spec),
         seed_of(spec.seed, &[index as u64, 0]),
-    );
+    )
+}
+
+/// Plays `spec.sessions` sessions per policy and seed against the child's own model.
+pub fn run_child(case: &ChildCase, index: usize, spec: &StudySpec) -> ChildResult {
+    let live = live_settings(spec);
+    let cluster_table = cluster_table(case, index, spec);
     let optimal = optimal_policy(&case.child_model, &spec.learning, Objective::Return);
     let bounds = Bounds {
         optimal: optimal.value,

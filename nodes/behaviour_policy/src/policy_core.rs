@@ -3,8 +3,8 @@
 //! data out: the node moves messages and saves files (see `persistent`).
 
 use crate::learning::{
-    Learning, Mode, QTable, action_probabilities, allowed_at, greedy_set, nth_member,
-    sample_weights, softmax_weights, td_target,
+    Learning, Mode, QTable, action_probabilities, allowed_at, best, epsilon_greedy_pick,
+    greedy_set, nth_member, sample_weights, softmax_weights, td_target,
 };
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -58,12 +58,14 @@ pub struct Decision {
     pub feedback: Feedback,
     /// Q(s, a) for a1..a5 (masked actions included, as stored).
     pub q_values: [f64; ACTION_COUNT],
-    /// Probability each action had: softmax, or uniform over the greedy ties when exploiting;
-    /// 0 for masked actions.
+    /// Probability each action had under the draw that chose it: softmax, uniform over the
+    /// greedy ties when exploiting, or ε-greedy's (ε / allowed, plus (1 − ε) / ties for a
+    /// greedy action); 0 for masked actions. Counterfactual evaluation weighs the decision
+    /// with exactly these.
     pub probabilities: [f64; ACTION_COUNT],
     /// How many of a1..a5 were allowed (3 at the first sequence or in the start state).
     pub allowed_actions: usize,
-    /// T_s (reported in exploitation too, where it is not used).
+    /// T_s (reported in exploitation and ε-greedy too, where it is not used).
     pub temperature: f64,
     /// A non-greedy action was drawn.
     pub explored: bool,
@@ -174,6 +176,10 @@ impl PolicyCore {
                     0
                 };
                 (nth_member(set, k), false)
+            }
+            Mode::EpsilonGreedy(epsilon) => {
+                let a = epsilon_greedy_pick(&row, allowed, epsilon, self.rng.random::<f64>());
+                (a, row[a] < best(&row, allowed))
             }
         };
         let action = Action::ALL[index];

@@ -5,7 +5,8 @@
 //! the same simulated child, from a session's fixed [`SessionDraws`] (common random numbers).
 
 use crate::learning::{
-    Learning, Mode, QTable, best, greedy_set, nth_member, sample_weights, td_target,
+    Learning, Mode, QTable, best, epsilon_greedy_pick, greedy_set, nth_member, sample_weights,
+    td_target,
 };
 use crate::softmax_cache::SoftmaxCache;
 use rand::{RngExt, SeedableRng};
@@ -266,6 +267,11 @@ impl<'a> Walker<'a> {
                     0
                 };
                 (nth_member(set, tie), false)
+            }
+            Mode::EpsilonGreedy(epsilon) => {
+                let u = draws.action(&mut run.rng, k);
+                let a = epsilon_greedy_pick(row, allowed, epsilon, u);
+                (a, row[a] < best(row, allowed))
             }
         };
         if count_visits {

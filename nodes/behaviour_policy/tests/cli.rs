@@ -634,6 +634,134 @@ fn evaluate_in_simulation_reports_bias_and_coverage_against_the_exact_value() {
 }
 
 #[test]
+fn evaluate_in_simulation_sweeps_logged_exploration_and_repeats_exactly() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let run = |out: &Path| {
+        ok(&[
+            "evaluate-in-simulation",
+            "--user-models",
+            "../../nodes/user_model/models/migrave_study_c2.json",
+            "--logging-q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--logging-temperature",
+            "epsilon:0.1,epsilon:0.3",
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--temperature",
+            "1",
+            "--sessions",
+            "30,60",
+            "--seeds",
+            "4",
+            "--bootstrap",
+            "50",
+            "--output",
+            path(out),
+        ])
+    };
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let shown = run(&a);
+    for words in [
+        "ε-greedy, ε = 0.1",
+        "judged policy 15.855",
+        "WIS RMSE",
+        "eps=0.3",
+    ] {
+        assert!(shown.contains(words), "{words}: {shown}");
+    }
+    run(&b);
+    let csv = |d: &Path| std::fs::read_to_string(d.join("sweep.csv")).expect("sweep.csv");
+    assert_eq!(csv(&a), csv(&b), "the same seeds give the same sweep");
+    // A header and one row per (logging policy, sessions).
+    assert_eq!(csv(&a).lines().count(), 1 + 2 * 2);
+    assert!(
+        csv(&a)
+            .lines()
+            .nth(1)
+            .is_some_and(|l| l.starts_with("eps=0.1,30,4,"))
+    );
+    fails(
+        &[
+            "evaluate-in-simulation",
+            "--logging-q-table",
+            "../../bags/q_tables/cluster_0.json",
+            "--logging-temperature",
+            "epsilon:2",
+            "--q-table",
+            "../../bags/q_tables/cluster_0.json",
+        ],
+        "`epsilon:E` with E in [0, 1]",
+    );
+}
+
+#[test]
+fn supervision_measures_the_rules_on_the_study_or_says_where_it_looked() {
+    fails(
+        &[
+            "supervision",
+            "--study",
+            "/nonexistent/study",
+            "--seeds",
+            "1",
+        ],
+        "/nonexistent/study: no such folder",
+    );
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/migrave-study");
+    if !study.is_dir() {
+        eprintln!("skipped: {} is absent", study.display());
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shown = ok(&[
+        "supervision",
+        "--study",
+        path(&study),
+        "--sessions",
+        "3",
+        "--seeds",
+        "2",
+        "--pretrain-epochs",
+        "5",
+        "--pretrain-runs",
+        "1",
+        "--bootstrap",
+        "200",
+        "--output",
+        path(dir.path()),
+    ]);
+    for words in [
+        "20 children",
+        "never (the policy alone)",
+        "T > 100 or σ (paper fit) > 0.3",
+        "σ (fitted noise) > 0.1",
+        "at random, 10 % of decisions",
+        "every decision",
+        "vs random, same rate",
+    ] {
+        assert!(shown.contains(words), "{words}: {shown}");
+    }
+    // Every decision proposed: 10 a session; the policy alone: none.
+    assert!(
+        shown
+            .lines()
+            .any(|l| l.starts_with("every decision") && l.contains(" 10.00 ")),
+        "{shown}"
+    );
+    let csv = std::fs::read_to_string(dir.path().join("supervision.csv")).expect("csv");
+    assert!(
+        csv.starts_with("child,cluster,rule,proposals_per_session,"),
+        "{csv}"
+    );
+    // Per child, the rules measured and the matched random ones.
+    assert!(csv.lines().count() > 1 + 20 * 14, "{csv}");
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("supervision.json")).expect("json"),
+    )
+    .expect("JSON");
+    assert_eq!(json[0]["proposals"], 0.0);
+}
+
+#[test]
 fn per_child_runs_on_the_study_or_says_where_it_looked() {
     fails(
         &["per-child", "--study", "/nonexistent/study", "--seeds", "1"],

@@ -96,12 +96,18 @@ pub struct GameManagerParams {
     /// A decision whose state's softmax temperature is above this is proposed (the
     /// temperature falls with the state's visits: 300 unvisited, 0.5 after 60 visits).
     pub propose_above_temperature: f64,
-    /// A decision whose user-model sigma of P(success) after the action is above this is
-    /// proposed (needs `user_model_file`).
+    /// A decision whose user-model σ of P(success) for the sequence it sets up is above this
+    /// is proposed (needs `user_model_file`). What σ means is the file's: with the paper's
+    /// fit (noise 1e-10, the shipped models) it is about 0 at every (L, F, PS) the study saw
+    /// even once and 0.25-0.39 where it saw none, so the rule means "never seen in the study"
+    /// for any limit between; with a model fitted with `user_model fit --noise fitted` it is
+    /// 0.06-0.22 on the study and says how well the data pin P(success) down.
     pub propose_above_success_std: f64,
     /// Seconds (before time_scale) the therapist has to answer a proposal.
     pub proposal_countdown_s: f64,
-    /// The user models the sigma rule reads (the behaviour policy's file); "" turns it off.
+    /// The user models the σ rule reads ("" turns it off): the behaviour policy's file, or
+    /// the same study fitted with `--noise fitted` (the same clusters) for a σ that means
+    /// uncertainty.
     pub user_model_file: String,
 }
 

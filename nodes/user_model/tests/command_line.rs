@@ -113,6 +113,69 @@ fn simulate_fit_predict() {
 }
 
 #[test]
+fn fit_with_a_fitted_noise_says_so_and_keeps_it_in_the_file() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let data = dir.path().join("study.csv");
+    write_csv(&data, &simulate_study(&StudySpec::default())).expect("writes");
+    let model = dir.path().join("fitted.json");
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit",
+            "--data",
+            data.to_str().expect("path"),
+            "--output",
+            model.to_str().expect("path"),
+            "--figures",
+            dir.path().to_str().expect("path"),
+        ];
+        args.extend_from_slice(extra);
+        user_model(&args)
+    };
+    let out = fit(&["--noise", "fitted"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        stdout.matches("per sequence (fitted)").count(),
+        4,
+        "{stdout}"
+    );
+    // What σ rests on, per cluster.
+    assert_eq!(
+        stdout
+            .matches("σ of P(success) by the cluster's sequences at the input: none: ")
+            .count(),
+        2,
+        "{stdout}"
+    );
+    let set = user_models::UserModelSet::load(&model).expect("loads");
+    assert!(
+        set.file().provenance.ends_with("--noise fitted"),
+        "{}",
+        set.file().provenance
+    );
+    assert!(set.file().clusters[0].success.group_sizes.is_some());
+    // The paper's fit (the default) says nothing of a noise.
+    let out = fit(&[]);
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("per sequence"));
+    for (args, words) in [
+        (
+            &["--noise", "fitted", "--fixed"][..],
+            "use one or the other",
+        ),
+        (&["--noise", "learned"][..], "is not `paper` or `fitted`"),
+    ] {
+        let out = fit(args);
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(words), "{args:?}: {err}");
+    }
+}
+
+#[test]
 fn a_failing_fit_writes_nothing_and_names_the_problem() {
     let dir = tempfile::tempdir().expect("temp dir");
     let data = dir.path().join("study.csv");

@@ -8,11 +8,13 @@
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
 use behaviour_policy::evaluation_plot::{evaluation_svg, validation_svg};
+use behaviour_policy::mdp::ExactValue;
 use behaviour_policy::off_policy::{
-    Evaluation, Limits, TargetPolicy, TargetTemperature, evaluate, validate,
+    EstimatorCheck, Evaluation, Limits, ScoreCloseness, TargetPolicy, TargetTemperature,
+    Validation, evaluate, validate,
 };
 use behaviour_policy::recorded::{LeftOut, LeftOutKind, LoggedSessions, logged_sessions};
-use behaviour_policy::{Learning, QTableFile, Reward};
+use behaviour_policy::{Learning, QTable, QTableFile, Reward};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -22,17 +24,29 @@ pub enum Temperature {
     Greedy,
     PerState,
     Fixed(f64),
+    /// ε-greedy: the live policy's logged exploration.
+    Epsilon(f64),
 }
 
 fn parse_temperature(s: &str) -> Result<Temperature, String> {
+    let bad = || {
+        format!(
+            "{s:?} is not `greedy`, `per-state`, a positive temperature or `epsilon:E` with E \
+             in [0, 1]"
+        )
+    };
     match s {
         "greedy" => Ok(Temperature::Greedy),
         "per-state" => Ok(Temperature::PerState),
-        _ => match s.parse::<f64>() {
-            Ok(t) if t.is_finite() && t > 0.0 => Ok(Temperature::Fixed(t)),
-            _ => Err(format!(
-                "{s:?} is not `greedy`, `per-state` or a positive temperature"
-            )),
+        _ => match s.strip_prefix("epsilon:") {
+            Some(e) => match e.parse::<f64>() {
+                Ok(e) if (0.0..=1.0).contains(&e) => Ok(Temperature::Epsilon(e)),
+                _ => Err(bad()),
+            },
+            None => match s.parse::<f64>() {
+                Ok(t) if t.is_finite() && t > 0.0 => Ok(Temperature::Fixed(t)),
+                _ => Err(bad()),
+            },
         },
     }
 }
@@ -43,6 +57,7 @@ impl Temperature {
             Temperature::Greedy => TargetTemperature::Greedy,
             Temperature::PerState => TargetTemperature::PerState(learning.temperature),
             Temperature::Fixed(t) => TargetTemperature::Fixed(t),
+            Temperature::Epsilon(e) => TargetTemperature::EpsilonGreedy(e),
         }
     }
 
@@ -51,6 +66,17 @@ impl Temperature {
             Temperature::Greedy => "greedy, as in real sessions".into(),
             Temperature::PerState => "softmax at each state's T_s".into(),
             Temperature::Fixed(t) => format!("softmax at T = {t}"),
+            Temperature::Epsilon(e) => format!("ε-greedy, ε = {e}"),
+        }
+    }
+
+    /// Short form for tables and files: `T=2`, `eps=0.1`.
+    fn short(self) -> String {
+        match self {
+            Temperature::Greedy => "greedy".into(),
+            Temperature::PerState => "per-state".into(),
+            Temperature::Fixed(t) => format!("T={t}"),
+            Temperature::Epsilon(e) => format!("eps={e}"),
         }
     }
 }
@@ -227,23 +253,25 @@ fn shown(e: &Evaluation, limits: &Limits) -> Vec<Shown> {
         ("discounted return", &e.discounted_return),
         ("score", &e.score),
     ] {
-        for (estimator, x, weighted) in [
-            ("logged policy (actual)", Some(q.logged), false),
-            ("new policy, weighted IS", q.weighted_is, true),
-            (
-                "new policy, per-decision IS",
-                Some(q.per_decision_is),
-                false,
-            ),
+        for (estimator, x, kind) in [
+            ("logged policy (actual)", Some(q.logged), 0),
+            ("new policy, weighted IS", q.weighted_is, 1),
+            ("new policy, per-decision IS", Some(q.per_decision_is), 2),
         ] {
             let Some(x) = x else {
                 continue;
             };
-            let no_interval = if weighted && !e.weighted_interval_holds(limits) {
+            let no_interval = if kind == 1 && !e.weighted_interval_holds(limits) {
                 Some(format!(
                     "rests on {:.1} effective sessions, below {}",
                     e.effective_sample_size, limits.min_effective_sessions
                 ))
+            } else if kind == 2 && !e.per_decision_interval_holds() {
+                Some(
+                    "no logged session follows the new policy throughout, so the estimate \
+                     rests on the beginnings of sessions only"
+                        .into(),
+                )
             } else if x.high.partial_cmp(&x.low) != Some(std::cmp::Ordering::Greater) {
                 Some("every bootstrap resample gave the same value".into())
             } else {
@@ -493,6 +521,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         {
             (w.low, w.high) = (w.value, w.value);
         }
+        if !e.per_decision_interval_holds() {
+            let p = &mut q.per_decision_is;
+            (p.low, p.high) = (p.value, p.value);
+        }
     }
     let subtitle = format!(
         "{} judged on {} recorded session(s) ({}); reward {}, 95 % bootstrap intervals (none \
@@ -522,45 +554,139 @@ pub struct SimulationArgs {
     /// The Q-table of the policy that plays and logs the sessions.
     #[arg(long)]
     logging_q_table: PathBuf,
-    /// How the logging policy picks (it must explore for the estimates to see other actions).
-    #[arg(long, default_value = "2", value_parser = parse_temperature)]
-    logging_temperature: Temperature,
+    /// How the logging policy picks (it must explore for the estimates to see other actions):
+    /// a softmax temperature, `per-state`, `greedy`, or `epsilon:E` (the live policy's logged
+    /// exploration, `exploration_epsilon`). Several, comma-separated, make a sweep.
+    #[arg(long, default_value = "2", value_parser = parse_temperature, value_delimiter = ',')]
+    logging_temperature: Vec<Temperature>,
     #[command(flatten)]
     judged: Judged,
-    /// Logged sessions per seed.
-    #[arg(long, default_value_t = 200)]
-    sessions: usize,
+    /// Logged sessions per seed; several, comma-separated, make a sweep (a seed's first N
+    /// sessions are the same whatever the number after them, and the same uniforms drive
+    /// every logging policy).
+    #[arg(long, default_value = "200", value_delimiter = ',')]
+    sessions: Vec<usize>,
     /// Seeds 0..N, each its own logged sessions and estimate.
     #[arg(long, default_value_t = 100)]
     seeds: u64,
     #[arg(long, default_value_t = 1000)]
     bootstrap: usize,
+    /// Points of score: how often is the judged policy's score judged within ± this?
+    #[arg(long, default_value_t = 1.0)]
+    tolerance: f64,
     #[arg(long, default_value = "out/evaluate-in-simulation")]
     output: PathBuf,
+}
+
+/// The lines saying how often the score was judged within the tolerance.
+fn closeness_lines(v: &Validation, tolerance: f64) -> String {
+    let c = v.score_closeness(tolerance);
+    let mut out = String::new();
+    for (name, x) in [
+        ("weighted IS, score", c.weighted_is),
+        ("per-decision IS, score", c.per_decision_is),
+    ] {
+        let _ = writeln!(
+            out,
+            "{name:<34} estimate within ±{tolerance} of the truth in {:.1} % of seeds; \
+             interval shown in {:.1} %, inside truth ±{tolerance} in {:.1} %{}",
+            100.0 * x.estimate_within,
+            100.0 * x.interval_shown,
+            100.0 * x.interval_within,
+            x.median_half_width
+                .map(|h| format!(" (median half-width {h:.2})"))
+                .unwrap_or_default()
+        );
+    }
+    out
+}
+
+/// One case of a sweep, as `sweep.json` and `sweep.csv` hold it.
+#[derive(Debug, serde::Serialize)]
+struct SweepCase {
+    logging: String,
+    sessions: usize,
+    seeds: usize,
+    logging_truth: ExactValue,
+    truth: ExactValue,
+    mean_effective_sample_size: f64,
+    weighted_is_score: EstimatorCheck,
+    per_decision_is_score: EstimatorCheck,
+    closeness: ScoreCloseness,
+}
+
+fn sweep_csv(cases: &[SweepCase]) -> String {
+    let mut out = String::from(
+        "logging,sessions,seeds,logging_true_score,judged_true_score,mean_effective_sessions,\
+         wis_seeds,wis_bias,wis_rmse,wis_coverage,wis_within,wis_interval_shown,wis_interval_within,\
+         wis_median_half_width,pdis_bias,pdis_rmse,pdis_coverage,pdis_within,pdis_interval_shown,\
+         pdis_interval_within,pdis_median_half_width\n",
+    );
+    let half = |h: Option<f64>| h.map(|h| format!("{h:.4}")).unwrap_or_default();
+    for c in cases {
+        let (w, p) = (c.closeness.weighted_is, c.closeness.per_decision_is);
+        let _ = writeln!(
+            out,
+            "{},{},{},{:.4},{:.4},{:.2},{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{}",
+            c.logging,
+            c.sessions,
+            c.seeds,
+            c.logging_truth.score,
+            c.truth.score,
+            c.mean_effective_sample_size,
+            c.weighted_is_score.seeds,
+            c.weighted_is_score.bias,
+            c.weighted_is_score.rmse,
+            c.weighted_is_score.coverage,
+            w.estimate_within,
+            w.interval_shown,
+            w.interval_within,
+            half(w.median_half_width),
+            c.per_decision_is_score.bias,
+            c.per_decision_is_score.rmse,
+            c.per_decision_is_score.coverage,
+            p.estimate_within,
+            p.interval_shown,
+            p.interval_within,
+            half(p.median_half_width),
+        );
+    }
+    out
 }
 
 pub fn run_in_simulation(a: SimulationArgs) -> anyhow::Result<()> {
     let (learning, target) = a.judged.load()?;
     let (tables, source) = user_models::load(&a.user_models, a.per_level_reference)?;
     user_models::check_clusters(&tables, &[a.cluster], &source)?;
-    let logging = TargetPolicy::new(
-        QTableFile::load(&a.logging_q_table)
-            .context("the logging policy (--logging-q-table)")?
-            .table,
-        a.logging_temperature.target(&learning),
-    )?;
-    if a.sessions == 0 || a.seeds == 0 {
+    let logging_table = QTableFile::load(&a.logging_q_table)
+        .context("the logging policy (--logging-q-table)")?
+        .table;
+    if a.sessions.contains(&0) || a.seeds == 0 {
         bail!("--sessions and --seeds must be at least 1");
     }
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        bail!("--tolerance must be a positive number of points");
+    }
+    if a.logging_temperature.len() > 1 || a.sessions.len() > 1 {
+        return run_sweep(
+            &a,
+            &learning,
+            &target,
+            (&tables[a.cluster], &source),
+            logging_table,
+        );
+    }
+    let (logging_temperature, sessions) = (a.logging_temperature[0], a.sessions[0]);
+    let logging = TargetPolicy::new(logging_table, logging_temperature.target(&learning))?;
     println!(
         "children: cluster {} of {source}; logging: {} ({}); judged: {} ({}); {} sessions per \
          seed, {} seeds, {} bootstrap resamples",
         a.cluster,
         a.logging_q_table.display(),
-        a.logging_temperature.describe(),
+        logging_temperature.describe(),
         a.judged.q_table.display(),
         a.judged.temperature.describe(),
-        a.sessions,
+        sessions,
         a.seeds,
         a.bootstrap
     );
@@ -570,7 +696,7 @@ pub fn run_in_simulation(a: SimulationArgs) -> anyhow::Result<()> {
         &logging,
         &target,
         &learning,
-        a.sessions,
+        sessions,
         0..a.seeds,
         a.bootstrap,
         &|| bar.inc(1),
@@ -614,11 +740,12 @@ pub fn run_in_simulation(a: SimulationArgs) -> anyhow::Result<()> {
         "mean effective sample size: {:.1} of {} sessions",
         v.mean_effective_sample_size, v.sessions
     );
+    print!("{}", closeness_lines(&v, a.tolerance));
     let subtitle = format!(
         "{} sessions logged by {} ({}) against cluster {}; judged: {} ({})",
-        a.sessions,
+        sessions,
         a.logging_q_table.display(),
-        a.logging_temperature.describe(),
+        logging_temperature.describe(),
         a.cluster,
         a.judged.q_table.display(),
         a.judged.temperature.describe()
@@ -626,16 +753,204 @@ pub fn run_in_simulation(a: SimulationArgs) -> anyhow::Result<()> {
     write_outputs(&a.output, "validation", &v, validation_svg(&v, &subtitle))
 }
 
+/// Every (logging policy, sessions) pair on the same seeds: a table of how often the score is
+/// judged within the tolerance, `sweep.csv` and `sweep.json`.
+fn run_sweep(
+    a: &SimulationArgs,
+    learning: &Learning,
+    target: &TargetPolicy,
+    (model, source): (&sequence_game::UserModelTable, &str),
+    table: QTable,
+) -> anyhow::Result<()> {
+    println!(
+        "children: cluster {} of {source}; logging: {} ({}); judged: {} ({}); sessions per \
+         seed {:?}, {} seeds (the same for every case), {} bootstrap resamples; score judged \
+         within ±{} point(s)",
+        a.cluster,
+        a.logging_q_table.display(),
+        a.logging_temperature
+            .iter()
+            .map(|t| t.describe())
+            .collect::<Vec<_>>()
+            .join(" | "),
+        a.judged.q_table.display(),
+        a.judged.temperature.describe(),
+        a.sessions,
+        a.seeds,
+        a.bootstrap,
+        a.tolerance
+    );
+    let total = (a.logging_temperature.len() * a.sessions.len()) as u64 * a.seeds;
+    let bar = progress_bar(total);
+    let mut cases = Vec::new();
+    for t in &a.logging_temperature {
+        let logging = TargetPolicy::new(table.clone(), t.target(learning))?;
+        for &sessions in &a.sessions {
+            let v = validate(
+                model,
+                &logging,
+                target,
+                learning,
+                sessions,
+                0..a.seeds,
+                a.bootstrap,
+                &|| bar.inc(1),
+            )?;
+            cases.push(SweepCase {
+                logging: t.short(),
+                sessions,
+                seeds: v.seeds,
+                logging_truth: v.logging_truth,
+                truth: v.truth,
+                mean_effective_sample_size: v.mean_effective_sample_size,
+                weighted_is_score: v.weighted_is_score,
+                per_decision_is_score: v.per_decision_is_score,
+                closeness: v.score_closeness(a.tolerance),
+            });
+        }
+    }
+    bar.finish_and_clear();
+    if let Some(c) = cases.first() {
+        println!(
+            "exact score per session (backward induction over the user model): judged policy \
+             {:.3} (return {:.3})",
+            c.truth.score, c.truth.discounted_return
+        );
+    }
+    let pct = |x: f64| format!("{:.0} %", 100.0 * x);
+    let half = |h: Option<f64>| h.map_or_else(|| "-".into(), |h| format!("{h:.2}"));
+    println!(
+        "{:<9} {:>8} {:>8} {:>9} | {:>8} {:>6} {:>6} {:>6} {:>7} | {:>8} {:>6} {:>6} {:>6} {:>7}",
+        "logging",
+        "sessions",
+        "log score",
+        "eff. ses.",
+        "WIS RMSE",
+        "cover",
+        "±tol",
+        "CI in",
+        "½ width",
+        "PDIS RMSE",
+        "cover",
+        "±tol",
+        "CI in",
+        "½ width"
+    );
+    for c in &cases {
+        let (w, p) = (c.closeness.weighted_is, c.closeness.per_decision_is);
+        let (wc, pc) = (c.weighted_is_score, c.per_decision_is_score);
+        let rmse = |e: EstimatorCheck| {
+            if e.seeds == 0 {
+                "-".into()
+            } else {
+                format!("{:.2}", e.rmse)
+            }
+        };
+        println!(
+            "{:<9} {:>8} {:>8.2} {:>9.1} | {:>8} {:>6} {:>6} {:>6} {:>7} | {:>8} {:>6} {:>6} {:>6} {:>7}",
+            c.logging,
+            c.sessions,
+            c.logging_truth.score,
+            c.mean_effective_sample_size,
+            rmse(wc),
+            pct(wc.coverage),
+            pct(w.estimate_within),
+            pct(w.interval_within),
+            half(w.median_half_width),
+            rmse(pc),
+            pct(pc.coverage),
+            pct(p.estimate_within),
+            pct(p.interval_within),
+            half(p.median_half_width)
+        );
+    }
+    println!(
+        "log score: the logging policy's exact score; RMSE and cover (95 % intervals holding the \
+         truth) over the seeds with an estimate; ±tol: seeds whose estimate of the score is \
+         within ±{0} of the truth; CI in: seeds where evaluate shows a 95 % interval lying \
+         inside the truth ±{0}; ½ width: the shown intervals' median half-width",
+        a.tolerance
+    );
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("creating {}", a.output.display()))?;
+    let json = a.output.join("sweep.json");
+    atomic_file::write(&json, serde_json::to_string_pretty(&cases)?.as_bytes())
+        .with_context(|| format!("writing {}", json.display()))?;
+    let csv = a.output.join("sweep.csv");
+    atomic_file::write(&csv, sweep_csv(&cases).as_bytes())
+        .with_context(|| format!("writing {}", csv.display()))?;
+    println!("wrote {} and {}", json.display(), csv.display());
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn no_interval_from_logs_no_session_of_which_the_new_policy_follows() {
+        use behaviour_policy::mdp::simulate_sessions;
+        use behaviour_policy::reference_tables::per_level_reference_tables;
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bags/q_tables");
+        let table = |k: usize| {
+            QTableFile::load(&root.join(format!("cluster_{k}.json")))
+                .expect("sample table")
+                .table
+        };
+        let learning = Learning::default();
+        // Logged by cluster 0's table exploring a little; judged: cluster 1's, greedy.
+        let logging =
+            TargetPolicy::new(table(0), TargetTemperature::EpsilonGreedy(0.1)).expect("policy");
+        let (log, full) = simulate_sessions(&per_level_reference_tables()[0], &logging, 80, 3);
+        let greedy = TargetPolicy::new(table(1), TargetTemperature::Greedy).expect("policy");
+        let e = evaluate(&log, Some(&full), &greedy, &learning, 100, 3).expect("evaluates");
+        assert_eq!(e.sessions_with_weight, 0);
+        let limits = Limits::default();
+        assert!(
+            e.refusals(&limits).is_empty(),
+            "every action is in the support"
+        );
+        let rows = shown(&e, &limits);
+        let pdis: Vec<&Shown> = rows
+            .iter()
+            .filter(|r| r.estimator == "new policy, per-decision IS")
+            .collect();
+        assert_eq!(pdis.len(), 2);
+        for r in pdis {
+            assert!(r.interval.is_none(), "{r:?}");
+            let why = r.no_interval.as_deref().unwrap_or_default();
+            assert!(
+                why.contains("no logged session follows the new policy"),
+                "{why}"
+            );
+        }
+        // Judged on the same logs, its own greedy choice keeps its intervals.
+        let own = TargetPolicy::new(table(0), TargetTemperature::Greedy).expect("policy");
+        let e = evaluate(&log, Some(&full), &own, &learning, 100, 3).expect("evaluates");
+        assert!(
+            shown(&e, &limits).iter().all(|r| r.interval.is_some()),
+            "{e:?}"
+        );
+    }
 
     #[test]
     fn temperatures_parse_or_say_what_is_expected() {
         assert_eq!(parse_temperature("greedy"), Ok(Temperature::Greedy));
         assert_eq!(parse_temperature("per-state"), Ok(Temperature::PerState));
         assert_eq!(parse_temperature("0.5"), Ok(Temperature::Fixed(0.5)));
-        for bad in ["0", "-1", "nan", "hot"] {
+        assert_eq!(
+            parse_temperature("epsilon:0.1"),
+            Ok(Temperature::Epsilon(0.1))
+        );
+        for bad in [
+            "0",
+            "-1",
+            "nan",
+            "hot",
+            "epsilon:1.5",
+            "epsilon:",
+            "epsilon:nan",
+        ] {
             let e = parse_temperature(bad).unwrap_err();
             assert!(e.contains("greedy"), "{e}");
         }

@@ -6,6 +6,7 @@ pub mod experiments;
 pub mod per_child;
 pub mod run;
 pub mod show_q_table;
+pub mod supervision;
 pub mod train;
 pub mod user_models;
 

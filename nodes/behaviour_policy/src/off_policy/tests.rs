@@ -337,4 +337,100 @@ fn the_policy_probabilities_are_the_live_policys() {
             assert_eq!(d.probabilities, policy.probabilities(state, s));
         }
     }
+    // And the live policy's logged exploration, greedy ties included.
+    let mut t = table(0);
+    t.q[5] = [0.5, 0.5, 0.1, 0.5, -1.0];
+    let mut core = PolicyCore::new(t.clone(), learning(), Mode::EpsilonGreedy(0.1), 1, 0);
+    let policy = TargetPolicy::new(t, TargetTemperature::EpsilonGreedy(0.1)).expect("policy");
+    for state in State::all() {
+        for s in [1, 2, 10] {
+            let d = core.decide(state, s).expect("decides");
+            assert_eq!(d.probabilities, policy.probabilities(state, s));
+        }
+    }
+    assert_eq!(
+        TargetPolicy::new(QTable::default(), TargetTemperature::EpsilonGreedy(1.5)),
+        Err(OffPolicyError::Epsilon(1.5))
+    );
+}
+
+#[test]
+fn logged_exploration_keeps_every_allowed_action_in_the_support_and_judges_the_greedy_policy() {
+    let model = &per_level_reference_tables()[0];
+    let eps = |e: f64| TargetPolicy::new(table(0), TargetTemperature::EpsilonGreedy(e));
+    let logging = eps(0.1).expect("policy");
+    // The logged sessions show every allowed action somewhere, so another policy never
+    // leaves their support: nothing is refused for it.
+    let (log, full) = simulate_sessions(model, &logging, 60, 4);
+    for (session, dists) in log.iter().zip(&full) {
+        for (s, p) in session.steps.iter().zip(dists) {
+            let allowed = allowed_at(s.state, s.step);
+            assert!(
+                p[..allowed]
+                    .iter()
+                    .all(|x| *x >= 0.1 / allowed as f64 - 1e-12)
+            );
+            assert!(p[allowed..].iter().all(|x| *x == 0.0), "{p:?}");
+        }
+    }
+    let e = evaluate(&log, Some(&full), &softmax(1, 1.0), &learning(), 50, 4).expect("evaluates");
+    assert_eq!(e.sessions_leaving_support, Some(0.0));
+    assert!(e.refusals(&Limits::default()).is_empty());
+    // What the live policy plays without exploring (its greedy choice) is judged within a
+    // point of its exact score from 200 sessions in most seeds.
+    let v = validate(
+        model,
+        &logging,
+        &greedy(0),
+        &learning(),
+        200,
+        0..20,
+        200,
+        &|| {},
+    )
+    .expect("validates");
+    let c = v.score_closeness(1.0);
+    assert_eq!(c.weighted_is.seeds, 20);
+    assert!(c.weighted_is.estimate_within >= 0.9, "{c:?}");
+    assert!(c.weighted_is.interval_shown >= 0.9, "{c:?}");
+    assert!(c.weighted_is.interval_within <= c.weighted_is.interval_shown);
+    // The shares are what the seeds' estimates say.
+    let by_hand = v
+        .per_seed
+        .iter()
+        .filter(|e| {
+            e.score
+                .weighted_is
+                .is_some_and(|w| (w.value - v.truth.score).abs() <= 1.0)
+        })
+        .count() as f64
+        / 20.0;
+    assert_eq!(c.weighted_is.estimate_within, by_hand);
+    // Any estimate is within a huge tolerance, and every shown interval inside it.
+    let wide = v.score_closeness(1e9);
+    assert_eq!(wide.per_decision_is.estimate_within, 1.0);
+    assert_eq!(
+        wide.per_decision_is.interval_within,
+        wide.per_decision_is.interval_shown
+    );
+    // A greedy log is refused for a softmax policy: no interval is ever shown.
+    let greedy_log = validate(
+        model,
+        &greedy(0),
+        &softmax(0, 1.0),
+        &learning(),
+        60,
+        0..5,
+        50,
+        &|| {},
+    )
+    .expect("validates");
+    let c = greedy_log.score_closeness(1.0);
+    assert_eq!(
+        (
+            c.weighted_is.interval_shown,
+            c.per_decision_is.interval_shown
+        ),
+        (0.0, 0.0)
+    );
 }

@@ -74,6 +74,58 @@ fn exploitation_is_greedy_with_random_ties_and_never_explores() {
 }
 
 #[test]
+fn epsilon_greedy_logs_the_probabilities_it_draws_with() {
+    let mut c = core(Mode::EpsilonGreedy(0.2));
+    let s = state(2, 1, -2);
+    // Two greedy ties: the tie-break is part of the logged probabilities.
+    c.table.q[s.index()] = [0.2, 0.7, 0.7, 0.1, 0.3];
+    let expected = [0.04, 0.44, 0.44, 0.04, 0.04];
+    let draws = 40_000;
+    let mut seen = [0usize; 5];
+    for _ in 0..draws {
+        let d = c.decide(s, 6).expect("decides");
+        assert_eq!(d.mode, Mode::EpsilonGreedy(0.2));
+        for (p, e) in d.probabilities.iter().zip(expected) {
+            assert!((p - e).abs() < 1e-12, "{:?}", d.probabilities);
+        }
+        assert!((d.probabilities.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        // Explored means a non-greedy action, whichever branch of the draw picked it.
+        assert_eq!(d.explored, !matches!(d.action.index(), 1 | 2), "{d:?}");
+        seen[d.action.index()] += 1;
+    }
+    // Each action as often as its logged probability says (4 standard errors).
+    for (a, e) in expected.iter().enumerate() {
+        let share = seen[a] as f64 / f64::from(draws);
+        let se = (e * (1.0 - e) / f64::from(draws)).sqrt();
+        assert!((share - e).abs() < 4.0 * se, "a{}: {share} vs {e}", a + 1);
+    }
+}
+
+#[test]
+fn epsilon_greedy_explores_only_among_the_allowed_actions() {
+    let mut c = core(Mode::EpsilonGreedy(crate::learning::MAX_EPSILON));
+    let s = state(3, 0, 3);
+    // Feedback would win if it were allowed; at the first sequence it is not.
+    c.table.q[s.index()] = [0.0, 0.5, 0.0, 1e9, 1e9];
+    let mut seen = [0usize; 5];
+    for _ in 0..6000 {
+        for (from, step) in [(s, 1), (State::START, 1), (State::START, 4)] {
+            let d = c.decide(from, step).expect("decides");
+            assert_eq!(d.allowed_actions, 3);
+            assert_eq!((d.probabilities[3], d.probabilities[4]), (0.0, 0.0));
+            assert!(!d.action.is_feedback(), "{d:?}");
+            seen[d.action.index()] += 1;
+        }
+    }
+    // Every allowed action is explored: each has probability at least ε / 3 = 0.1.
+    assert!(seen[..3].iter().all(|n| *n > 1500), "{seen:?}");
+    // From a later sequence all five are allowed, feedback included.
+    let d = c.decide(s, 2).expect("decides");
+    assert_eq!(d.allowed_actions, 5);
+    assert!(d.probabilities.iter().all(|p| *p >= 0.06), "{d:?}");
+}
+
+#[test]
 fn learn_applies_algorithm_1_and_skips_the_bootstrap_at_the_end() {
     let learning = Learning {
         reward: Reward::RePlusBetaE,

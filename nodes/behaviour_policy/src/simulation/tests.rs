@@ -56,6 +56,23 @@ fn plain_session(
                 };
                 ties[k]
             }
+            Mode::EpsilonGreedy(epsilon) => {
+                // One uniform: below ε it picks among all allowed actions, above among the
+                // greedy ties, each share split evenly.
+                let u = rng.random::<f64>();
+                let max = q.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+                let ties: Vec<Action> = allowed
+                    .iter()
+                    .zip(&q)
+                    .filter(|(_, x)| **x == max)
+                    .map(|(a, _)| *a)
+                    .collect();
+                if u < epsilon {
+                    allowed[(u / epsilon * allowed.len() as f64) as usize]
+                } else {
+                    ties[((u - epsilon) / (1.0 - epsilon) * ties.len() as f64) as usize]
+                }
+            }
         };
         if count_visits {
             table.visits[state.index()] += 1;
@@ -114,7 +131,7 @@ fn tight_loop_equals_the_plain_algorithm_step_for_step() {
     let models = per_level_reference_tables();
     for (k, model) in models.iter().enumerate() {
         for reward in Reward::ALL {
-            for mode in [Mode::Explore, Mode::Exploit] {
+            for mode in [Mode::Explore, Mode::Exploit, Mode::EpsilonGreedy(0.2)] {
                 for lag in [true, false] {
                     let s = settings(reward, mode, lag);
                     let user = SimulatedUser::new(model, &s.learning);

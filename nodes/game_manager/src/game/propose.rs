@@ -1,7 +1,7 @@
 //! Supervised autonomy (as SPARC does): a decision the policy is unsure of, because its state
 //! is still hot (temperature above a parameter: few visits) or the user model's σ of
-//! P(success) after the action is above a parameter, is proposed to the therapist with a
-//! countdown. Accepted, or run out, it plays; an override replaces it; the session's end
+//! P(success) after the action is above a parameter (the rule: `user_models::supervision`),
+//! is proposed to the therapist with a countdown. Accepted, or run out, it plays; an override replaces it; the session's end
 //! withdraws it. Each step is published (ActionProposal) for the page and the bag, and the
 //! response goes into the sequence's record with the decision's reason. The countdown stops
 //! while the session is paused or held and starts again, whole, on resume.
@@ -13,6 +13,7 @@ use qt_therapy_msgs::live_line::{level_and_feedback, proposal_answer, proposal_a
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, BehaviourState};
 use sequence_game::{Feedback, Level, ModelInput, UserModelTable};
+use user_models::supervision::{self, ProposalRule};
 
 /// A proposal waiting for the therapist.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,23 +53,14 @@ impl GameManager {
         self
     }
 
-    /// The σ of F^p at the state the action leads to, for the session's cluster; the largest
-    /// over the clusters when the cluster is unknown (-1, or not in the file): not knowing
-    /// the child is a reason for caution. None without user models.
+    /// The σ of F^p for the sequence the action sets up, for the session's cluster (or the
+    /// most cautious of the file's; `user_models::supervision::success_std`). What it means
+    /// depends on the file's fit: with the paper's noise it is about 0 wherever the study saw
+    /// the input at all (docs/game_manager.md).
     fn success_std(&self, level: Level, feedback: Feedback, previous_score: i8) -> Option<f64> {
         let input = ModelInput::new(level, feedback, previous_score).ok()?;
         let cluster = self.session.as_ref().map_or(-1, |s| s.cluster);
-        let own = usize::try_from(cluster)
-            .ok()
-            .and_then(|c| self.user_models.iter().find(|t| t.cluster == c));
-        match own {
-            Some(t) => Some(t.success(input).std),
-            None => self
-                .user_models
-                .iter()
-                .map(|t| t.success(input).std)
-                .reduce(f64::max),
-        }
+        supervision::success_std(&self.user_models, cluster.into(), input)
     }
 
     fn unsure(&self, plan: &Plan, temperature: f64) -> Option<Unsure> {
@@ -77,19 +69,15 @@ impl GameManager {
         }
         let previous_score = self.session.as_ref()?.state.previous_score;
         let success_std = self.success_std(plan.level, plan.feedback, previous_score);
-        let mut reasons = Vec::new();
-        let t_max = self.params.propose_above_temperature;
-        if temperature > t_max {
-            reasons.push(format!(
-                "the state is little visited (temperature {temperature:.1} > {t_max})"
-            ));
-        }
-        let s_max = self.params.propose_above_success_std;
-        if let Some(std) = success_std.filter(|s| *s > s_max) {
-            reasons.push(format!(
-                "the user model is unsure of success (σ {std:.2} > {s_max})"
-            ));
-        }
+        let rule = ProposalRule {
+            above_temperature: self.params.propose_above_temperature,
+            above_success_std: self.params.propose_above_success_std,
+        };
+        let reasons: Vec<String> = rule
+            .reasons(temperature, success_std)
+            .iter()
+            .map(|r| r.to_string())
+            .collect();
         (!reasons.is_empty()).then(|| Unsure {
             temperature,
             success_std,

@@ -4,7 +4,7 @@
 use anyhow::{Context, bail};
 use std::io::Write;
 use std::path::PathBuf;
-use user_models::{FitOptions, Kernel};
+use user_models::{FitOptions, Kernel, NoiseModel};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -35,6 +35,13 @@ pub struct Args {
     /// authors' setting).
     #[arg(long, default_value_t = 0)]
     restarts: usize,
+    /// The GPs' noise: `paper` (the authors': 1e-10 on every target, so σ of a prediction is
+    /// about 0 wherever the data has a group, however few sequences it holds, and large only
+    /// where it has none) or `fitted` (each target is the mean of its group's n sequences and
+    /// gets σ²/n, σ² fitted by the log marginal likelihood beside the kernel: σ says how well
+    /// the data pin the prediction down).
+    #[arg(long, default_value = "paper", value_parser = parse_noise)]
+    noise: NoiseModel,
     /// K-means runs from different k-means++ seedings.
     #[arg(long, default_value_t = 10)]
     kmeans_restarts: usize,
@@ -44,6 +51,14 @@ pub struct Args {
     /// Directory for clusters.{svg,png} and levels.{svg,png} [default: beside the output].
     #[arg(long)]
     figures: Option<PathBuf>,
+}
+
+fn parse_noise(s: &str) -> Result<NoiseModel, String> {
+    match s {
+        "paper" => Ok(NoiseModel::Fixed),
+        "fitted" => Ok(NoiseModel::FittedPerSequence),
+        _ => Err(format!("{s:?} is not `paper` or `fitted`")),
+    }
 }
 
 fn kernel(a: &Args) -> anyhow::Result<Kernel> {
@@ -94,6 +109,15 @@ pub fn main(a: Args) -> anyhow::Result<()> {
     if a.fixed {
         provenance.push_str(" --fixed");
     }
+    if a.noise == NoiseModel::FittedPerSequence {
+        provenance.push_str(" --noise fitted");
+        if a.fixed {
+            bail!(
+                "--noise fitted searches the noise by the log marginal likelihood, which --fixed \
+                 turns off: use one or the other"
+            );
+        }
+    }
     let options = FitOptions {
         clusters: a.clusters,
         seed: a.seed,
@@ -101,6 +125,7 @@ pub fn main(a: Args) -> anyhow::Result<()> {
         kernel: kernel(&a)?,
         optimise: !a.fixed,
         optimiser_restarts: a.restarts,
+        noise_model: a.noise,
         provenance,
         ..FitOptions::default()
     };
@@ -145,15 +170,45 @@ pub fn main(a: Args) -> anyhow::Result<()> {
     }
     for c in &set.file().clusters {
         for (name, g) in [("F^p", &c.success), ("F^e", &c.engagement)] {
+            let noise = match &g.group_sizes {
+                Some(_) => format!(", noise σ² {:.4} per sequence (fitted)", g.noise),
+                None => String::new(),
+            };
             writeln!(
                 out,
-                "cluster {} {name}: {} points, {:?}, log marginal likelihood {:.4}",
+                "cluster {} {name}: {} points, {:?}{noise}, log marginal likelihood {:.4}",
                 c.cluster,
                 g.targets.len(),
                 g.kernel,
                 g.log_marginal_likelihood
             )?;
         }
+    }
+    // What σ of P(success) rests on: with the paper's noise it is about 0 wherever the
+    // cluster's data has the input at all, once or often.
+    for c in &set.file().clusters {
+        let members: Vec<&user_models::InteractionRecord> = records
+            .iter()
+            .filter(|r| c.users.contains(&r.user_id))
+            .collect();
+        let table = set.table(c.cluster as i64)?;
+        let buckets = user_models::supervision::sigma_by_support(table, &members);
+        let parts: Vec<String> = buckets
+            .iter()
+            .filter(|b| b.inputs > 0)
+            .map(|b| {
+                format!(
+                    "{}: {} inputs, {:.5}-{:.5} (mean {:.5})",
+                    b.label, b.inputs, b.min, b.max, b.mean
+                )
+            })
+            .collect();
+        writeln!(
+            out,
+            "cluster {} σ of P(success) by the cluster's sequences at the input: {}",
+            c.cluster,
+            parts.join("; ")
+        )?;
     }
     writeln!(out, "model: {}", a.output.display())?;
     for w in written {
