@@ -216,9 +216,16 @@ pub fn live_by(run: &Path, processes: &Processes) -> Vec<LiveBy> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Mutex;
+
+    /// A child forked by one test holds a copy of every open file of this process until it
+    /// execs (a flock belongs to the open file, so the copy keeps a lock the other test let
+    /// go of: seen once under load). The tests that lock and the test that forks take turns.
+    static FORK_OR_LOCK: Mutex<()> = Mutex::new(());
 
     #[test]
     fn a_held_lock_names_its_holder_and_a_free_one_is_taken() {
+        let _turn = FORK_OR_LOCK.lock().unwrap_or_else(|e| e.into_inner());
         let dir = tempfile::tempdir().expect("temp dir");
         // As InstanceLock::acquire takes it (a flock per open file, so in-process works).
         let held = File::open(dir.path()).expect("opens");
@@ -234,6 +241,7 @@ mod tests {
 
     #[test]
     fn a_process_naming_a_directory_uses_it() {
+        let _turn = FORK_OR_LOCK.lock().unwrap_or_else(|e| e.into_inner());
         let dir = tempfile::tempdir().expect("temp dir");
         let run = dir.path().join("run-1");
         std::fs::create_dir_all(&run).expect("dir");
