@@ -3,23 +3,22 @@
 //! them field for field (the `mirror` test proves it), serialises to the same CDR as a ROS 2
 //! peer, and names itself `qt_therapy_msgs::msg::dds_::<Type>_` on DDS.
 
+pub mod codes;
 pub mod definition;
 pub mod hri_msgs;
-pub mod live_line;
 pub mod messages;
 pub mod phases;
 pub mod qt_robot_interface;
 pub mod qtrobot_interfaces;
 pub mod results;
-pub mod sequence_engagement;
 pub mod services;
 mod standard;
 pub mod topics;
 pub mod validate;
 
+pub use codes::{Command, CommandOutcome, GamePhase, ProposalStatus, UnknownCode};
 pub use definition::{MessageDefinition, RosType};
 pub use messages::*;
-pub use results::Tally;
 pub use services::*;
 pub use standard::{builtin_interfaces, std_msgs};
 pub use validate::{InvalidMessage, Validate};

@@ -1,44 +1,23 @@
 //! The game manager's phases (`GameState.phase`) by name, and which of them are a session
-//! under way: the therapist console, the tablet bridge and its pages all read them from here.
+//! under way, for a raw code: the therapist console, the tablet bridge and its pages all read
+//! them from here. The rules are [`GamePhase`]'s.
 
-use crate::GameState;
-
-/// The phases by name, indexed by `GameState.phase`.
-pub const PHASES: [&str; 9] = [
-    "idle",
-    "deciding",
-    "giving_feedback",
-    "saying_sequence",
-    "waiting_for_answer",
-    "paused",
-    "finished",
-    "stopped",
-    "emergency_stopped",
-];
+use crate::{GamePhase, GameState};
 
 impl GameState {
     /// The name of `phase` (`saying_sequence`), `unknown` outside the list.
     pub fn phase_name(phase: u8) -> &'static str {
-        PHASES.get(usize::from(phase)).copied().unwrap_or("unknown")
+        GamePhase::try_from(phase).map_or("unknown", GamePhase::name)
     }
 
     /// Whether `phase` is a sequence under way (not idle, paused or ended).
     pub fn is_running(phase: u8) -> bool {
-        matches!(
-            phase,
-            GameState::DECIDING
-                | GameState::GIVING_FEEDBACK
-                | GameState::SAYING_SEQUENCE
-                | GameState::WAITING_FOR_ANSWER
-        )
+        GamePhase::try_from(phase).is_ok_and(GamePhase::is_running)
     }
 
     /// Whether `phase` ends a session.
     pub fn is_ended(phase: u8) -> bool {
-        matches!(
-            phase,
-            GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
-        )
+        GamePhase::try_from(phase).is_ok_and(GamePhase::is_ended)
     }
 }
 

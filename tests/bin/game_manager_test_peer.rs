@@ -268,7 +268,7 @@ async fn run(shell: &mut NodeShell, cli: &Cli) -> anyhow::Result<i32> {
                 let ended = s.phase == GameState::FINISHED
                     || (emergency_sent && s.phase == GameState::EMERGENCY_STOPPED);
                 if ended {
-                    let grace = tokio::time::sleep(qt_therapy_msgs::live_line::LAST_RESULT_GRACE);
+                    let grace = tokio::time::sleep(session_tally::live_line::LAST_RESULT_GRACE);
                     tokio::pin!(grace);
                     loop {
                         tokio::select! {

@@ -4,7 +4,7 @@
 //! a second seen by several cameras counts once. The game manager scores live with this, and
 //! the user models read recorded sessions with the same rule.
 
-use crate::ExpectedEngagement;
+use qt_therapy_msgs::ExpectedEngagement;
 use std::collections::BTreeMap;
 
 /// A sequence's engagement: the mean, and the per-second values it came from.
@@ -81,7 +81,7 @@ impl EngagementLog {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::builtin_interfaces::Time;
+    use qt_therapy_msgs::builtin_interfaces::Time;
 
     const S: i64 = 1_000_000_000;
 

@@ -3,7 +3,7 @@
 //! per scored sequence, and a proposal to the therapist (supervised autonomy) with what
 //! became of it, in the same words for the game manager, the console and the report.
 
-use crate::{ActionProposal, Decision, SequenceResult};
+use qt_therapy_msgs::{ActionProposal, Decision, ProposalStatus, SequenceResult};
 use sequence_game::{Action, Feedback, Level};
 use std::time::Duration;
 
@@ -135,31 +135,26 @@ pub fn proposal_asked(p: &ActionProposal) -> String {
 /// The status of an `ActionProposal` by name (`proposed`, `accepted`, `replaced`,
 /// `timed_out`, `withdrawn`), which the page translates; `unknown` otherwise.
 pub fn proposal_status_name(status: u8) -> &'static str {
-    match status {
-        ActionProposal::PROPOSED => "proposed",
-        ActionProposal::ACCEPTED => "accepted",
-        ActionProposal::REPLACED => "replaced",
-        ActionProposal::TIMED_OUT => "timed_out",
-        ActionProposal::WITHDRAWN => "withdrawn",
-        _ => "unknown",
-    }
+    ProposalStatus::try_from(status).map_or("unknown", ProposalStatus::name)
 }
 
 /// What became of a proposal, from the message that settled it: `accepted after 2.1 s`,
 /// `replaced by L3 after 1.2 s`, `ran out after 5.0 s: played`, `withdrawn (the session
 /// ended first)`.
 pub fn proposal_answer(s: &ActionProposal) -> String {
-    match s.status {
-        ActionProposal::PROPOSED => "waiting for the therapist".into(),
-        ActionProposal::ACCEPTED => format!("accepted after {:.1} s", s.response_time),
-        ActionProposal::REPLACED => format!(
+    match ProposalStatus::try_from(s.status) {
+        Ok(ProposalStatus::Proposed) => "waiting for the therapist".into(),
+        Ok(ProposalStatus::Accepted) => format!("accepted after {:.1} s", s.response_time),
+        Ok(ProposalStatus::Replaced) => format!(
             "replaced by {} after {:.1} s",
             level_and_feedback(s.played_level, s.played_feedback),
             s.response_time
         ),
-        ActionProposal::TIMED_OUT => format!("ran out after {:.1} s: played", s.response_time),
-        ActionProposal::WITHDRAWN => "withdrawn (the session ended first)".into(),
-        other => format!("status {other}?"),
+        Ok(ProposalStatus::TimedOut) => {
+            format!("ran out after {:.1} s: played", s.response_time)
+        }
+        Ok(ProposalStatus::Withdrawn) => "withdrawn (the session ended first)".into(),
+        Err(_) => format!("status {}?", s.status),
     }
 }
 

@@ -16,7 +16,7 @@ pub mod node;
 use openface::synthetic::{SyntheticSpec, generate};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{GameState, OpenFaceFeatures, TabletAnswer, TabletTask};
+use qt_therapy_msgs::{GamePhase, GameState, OpenFaceFeatures, TabletAnswer, TabletTask};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sequence_game::{Emotion, Feedback, Level, ModelInput, Outcome, UserModelTable};
@@ -271,14 +271,15 @@ impl SimulatedChild {
             self.session_key = sequence_game::stable_id_hash(&state.session_id);
             self.plan = None;
         }
+        let phase = GamePhase::try_from(state.phase).ok();
         let presenting = matches!(
-            state.phase,
-            GameState::GIVING_FEEDBACK | GameState::SAYING_SEQUENCE
+            phase,
+            Some(GamePhase::GivingFeedback | GamePhase::SayingSequence)
         );
         let key = (self.session_key, state.sequence_index);
         // The task's own state counts too: GameState keeps only its last sample, so a loaded
         // child may never see the presentation's.
-        let of_a_sequence = presenting || state.phase == GameState::WAITING_FOR_ANSWER;
+        let of_a_sequence = presenting || phase == Some(GamePhase::WaitingForAnswer);
         if of_a_sequence && self.plan.is_none_or(|p| p.session_sequence != key) {
             let (Ok(level), Ok(feedback)) = (
                 Level::new(state.level.into()),
@@ -303,8 +304,8 @@ impl SimulatedChild {
             });
             self.target_engagement = engagement;
         }
-        match state.phase {
-            GameState::WAITING_FOR_ANSWER => {
+        match phase {
+            Some(GamePhase::WaitingForAnswer) => {
                 self.target_engagement = self.params.engagement_while_answering
             }
             _ if presenting => self.target_engagement = self.plan.map_or(0.0, |p| p.engagement),

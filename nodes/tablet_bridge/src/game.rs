@@ -4,7 +4,8 @@
 
 use crate::bridge::{Bridge, DdsInput, Now, OpenTask, Output, log};
 use crate::protocol::{DecisionView, EngagementPoint, ResultView, Role, ServerMessage, TaskView};
-use qt_therapy_msgs::{GameState, TabletTask, Tally};
+use qt_therapy_msgs::{GamePhase, GameState, TabletTask};
+use session_tally::Tally;
 use std::collections::VecDeque;
 use tracing::Level;
 
@@ -58,11 +59,11 @@ impl Bridge {
             self.current_session = Some(g.session_id.clone());
         }
         let ended = matches!(
-            g.phase,
-            GameState::IDLE
-                | GameState::FINISHED
-                | GameState::STOPPED
-                | GameState::EMERGENCY_STOPPED
+            GamePhase::try_from(g.phase),
+            Ok(GamePhase::Idle
+                | GamePhase::Finished
+                | GamePhase::Stopped
+                | GamePhase::EmergencyStopped)
         );
         let other_session = self
             .task
@@ -95,10 +96,7 @@ impl Bridge {
             }
         }
         if let Some(g) = &self.game {
-            let over = matches!(
-                g.phase,
-                GameState::FINISHED | GameState::STOPPED | GameState::EMERGENCY_STOPPED
-            );
+            let over = GameState::is_ended(g.phase);
             if over && g.session_id == t.session_id {
                 out.push(log(
                     Level::INFO,

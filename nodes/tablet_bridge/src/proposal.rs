@@ -5,10 +5,10 @@
 
 use crate::bridge::{Bridge, Now, Output, log};
 use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage};
-use qt_therapy_msgs::live_line::proposal_status_name;
 use qt_therapy_msgs::topics::ACTION_PROPOSAL;
 use qt_therapy_msgs::{ActionProposal, GameState};
 use session_log::Arrival;
+use session_tally::live_line::proposal_status_name;
 use std::time::Duration;
 use tracing::Level;
 

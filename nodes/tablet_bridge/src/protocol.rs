@@ -2,12 +2,14 @@
 //! parsed strictly (unknown types and fields, wrong types and missing fields are rejected with
 //! serde's reason); outgoing ones are views of the DDS messages the pages need.
 
-use qt_therapy_msgs::live_line::proposal_status_name;
 use qt_therapy_msgs::{
-    ActionProposal, Decision, ExpectedEngagement, GameState, SequenceResult, TabletTask, Tally,
+    ActionProposal, Decision, ExpectedEngagement, GameState, ProposalStatus, SequenceResult,
+    TabletTask,
 };
 use sequence_game::{ACTION_COUNT, Action, Feedback};
 use serde::{Deserialize, Serialize};
+use session_tally::Tally;
+use session_tally::live_line::proposal_status_name;
 
 /// A feedback code's name, `unknown` outside 0..=2.
 fn feedback_name(feedback: u8) -> &'static str {
@@ -361,11 +363,12 @@ pub struct ProposalView {
 impl ProposalView {
     /// `p` with `remaining` seconds left on its countdown (as the bridge counts it).
     pub fn of(p: &ActionProposal, remaining: f64) -> Self {
+        let status = ProposalStatus::try_from(p.status);
         let played = matches!(
-            p.status,
-            ActionProposal::ACCEPTED | ActionProposal::REPLACED | ActionProposal::TIMED_OUT
+            status,
+            Ok(ProposalStatus::Accepted | ProposalStatus::Replaced | ProposalStatus::TimedOut)
         );
-        let open = p.status == ActionProposal::PROPOSED;
+        let open = status == Ok(ProposalStatus::Proposed);
         ProposalView {
             session_id: p.session_id.clone(),
             step: p.step,

@@ -6,7 +6,7 @@ use crate::limits::pin_matches;
 use crate::protocol::{CommandKind, Role, ServerMessage};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{GameState, TherapistCommand, Validate};
+use qt_therapy_msgs::{GamePhase, GameState, TherapistCommand, Validate};
 use std::collections::VecDeque;
 use std::time::Duration;
 use tracing::Level;
@@ -167,15 +167,9 @@ impl Bridge {
 
     /// The session a command goes to; START opens a new one.
     fn session_for(&self, kind: CommandKind, now: Now) -> Result<String, String> {
+        // A session under way, paused or not.
         let running = self.game.as_ref().filter(|g| {
-            matches!(
-                g.phase,
-                GameState::DECIDING
-                    | GameState::GIVING_FEEDBACK
-                    | GameState::SAYING_SEQUENCE
-                    | GameState::WAITING_FOR_ANSWER
-                    | GameState::PAUSED
-            )
+            GamePhase::try_from(g.phase).is_ok_and(|p| p.is_running() || p == GamePhase::Paused)
         });
         match kind {
             CommandKind::Start => {

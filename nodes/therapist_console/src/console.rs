@@ -6,12 +6,15 @@
 use crate::proposals::{self, Proposals};
 use anyhow::{Context, bail};
 use node_shell::{Bus, Outbox};
-use qt_therapy_msgs::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
 use qt_therapy_msgs::topics::{
     ACTION_PROPOSAL, DECISION, GAME_STATE, SEQUENCE_RESULT, THERAPIST_COMMAND,
 };
-use qt_therapy_msgs::{ActionProposal, Decision, GameState, SequenceResult, TherapistCommand};
+use qt_therapy_msgs::{
+    ActionProposal, CommandOutcome, Decision, GamePhase, GameState, SequenceResult,
+    TherapistCommand,
+};
 use session_log::{Arrival, Once};
+use session_tally::live_line::{LAST_RESULT_GRACE, reason_from_messages, sequence_line};
 use std::time::Duration;
 use tokio::sync::mpsc::Receiver;
 use tokio::time::Instant;
@@ -73,12 +76,12 @@ pub fn answer_to(c: &TherapistCommand, s: &GameState) -> Option<Answer> {
     if s.command_session_id != c.session_id || s.command_id != c.command_id {
         return None;
     }
-    match s.command_outcome {
-        GameState::COMMAND_CARRIED_OUT | GameState::COMMAND_ALREADY_CARRIED_OUT => {
+    match CommandOutcome::try_from(s.command_outcome) {
+        Ok(CommandOutcome::CarriedOut | CommandOutcome::AlreadyCarriedOut) => {
             Some(Answer::CarriedOut)
         }
-        GameState::COMMAND_REFUSED => Some(Answer::Refused(s.command_refusal.clone())),
-        _ => None,
+        Ok(CommandOutcome::Refused) => Some(Answer::Refused(s.command_refusal.clone())),
+        Ok(CommandOutcome::None) | Err(_) => None,
     }
 }
 
@@ -211,11 +214,11 @@ impl<'a, B: Bus> Console<'a, B> {
             }
         }
         if !matches!(
-            state.phase,
-            GameState::IDLE
-                | GameState::FINISHED
-                | GameState::STOPPED
-                | GameState::EMERGENCY_STOPPED
+            GamePhase::try_from(state.phase),
+            Ok(GamePhase::Idle
+                | GamePhase::Finished
+                | GamePhase::Stopped
+                | GamePhase::EmergencyStopped)
         ) {
             bail!(
                 "the game manager is busy with session {} (phase {}): stop it first",
@@ -317,8 +320,8 @@ impl<'a, B: Bus> Console<'a, B> {
                         say(&format!("  [{}] {}", phase_name(s.phase), s.status));
                         last_status = s.status.clone();
                     }
-                    match s.phase {
-                        GameState::FINISHED => {
+                    match GamePhase::try_from(s.phase) {
+                        Ok(GamePhase::Finished) => {
                             let grace = Instant::now() + LAST_RESULT_GRACE;
                             while followed.sequences() < usize::from(s.sequence_index) {
                                 match tokio::time::timeout_at(grace, results.recv()).await {
@@ -334,7 +337,7 @@ impl<'a, B: Bus> Console<'a, B> {
                             ));
                             return Ok(0);
                         }
-                        GameState::STOPPED | GameState::EMERGENCY_STOPPED => {
+                        Ok(GamePhase::Stopped | GamePhase::EmergencyStopped) => {
                             say(&format!("session {session} {}", phase_name(s.phase)));
                             return Ok(3);
                         }

@@ -5,11 +5,11 @@
 
 use crate::console::{Answer, CONFIRM_WAIT, SENDS, answer_to};
 use qt_therapy_msgs::builtin_interfaces::Time;
-use qt_therapy_msgs::live_line::{proposal_answer, proposal_asked};
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::topics::ACTION_PROPOSAL;
 use qt_therapy_msgs::{ActionProposal, GameState, TherapistCommand};
 use session_log::{Arrival, Once};
+use session_tally::live_line::{proposal_answer, proposal_asked};
 use std::time::Instant;
 
 /// What the caller must do.

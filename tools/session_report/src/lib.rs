@@ -7,10 +7,11 @@
 
 use figures::engagement::{EngagementPlot, engagement_svg};
 use plotters::prelude::*;
-use qt_therapy_msgs::live_line::{proposal_answer, proposal_asked};
 use qt_therapy_msgs::{
-    ActionProposal, Decision, ExpectedEngagement, GameState, SequenceResult, Tally,
+    ActionProposal, Decision, ExpectedEngagement, GameState, ProposalStatus, SequenceResult,
 };
+use session_tally::Tally;
+use session_tally::live_line::{proposal_answer, proposal_asked};
 use std::fmt::Write as _;
 
 /// Why a report could not be made.
@@ -213,17 +214,17 @@ impl SessionLog {
         let mut answered = Vec::new();
         for p in self.proposals() {
             t.proposed += 1;
-            match p.settled.map(|s| s.status) {
-                Some(ActionProposal::ACCEPTED) => t.accepted += 1,
-                Some(ActionProposal::REPLACED) => t.replaced += 1,
-                Some(ActionProposal::TIMED_OUT) => t.timed_out += 1,
-                Some(ActionProposal::WITHDRAWN) => t.withdrawn += 1,
-                _ => t.unsettled += 1,
+            match p.settled.map(|s| ProposalStatus::try_from(s.status)) {
+                Some(Ok(ProposalStatus::Accepted)) => t.accepted += 1,
+                Some(Ok(ProposalStatus::Replaced)) => t.replaced += 1,
+                Some(Ok(ProposalStatus::TimedOut)) => t.timed_out += 1,
+                Some(Ok(ProposalStatus::Withdrawn)) => t.withdrawn += 1,
+                Some(Ok(ProposalStatus::Proposed) | Err(_)) | None => t.unsettled += 1,
             }
             if let Some(s) = p.settled.filter(|s| {
                 matches!(
-                    s.status,
-                    ActionProposal::ACCEPTED | ActionProposal::REPLACED
+                    ProposalStatus::try_from(s.status),
+                    Ok(ProposalStatus::Accepted | ProposalStatus::Replaced)
                 )
             }) {
                 answered.push(f64::from(s.response_time));

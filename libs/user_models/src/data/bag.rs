@@ -1,7 +1,7 @@
 //! Interaction records from our MCAP session bags (`bag record`), so user models can be fitted
 //! straight from recorded sessions: one record per `SequenceResult`, with the per-second
 //! engagement recomputed from the `ExpectedEngagement` windows of the period the robot talked
-//! for that sequence, the game manager's own period and rule (`msgs/src/sequence_engagement.rs`):
+//! for that sequence, the game manager's own period and rule (`session_tally::engagement`):
 //! from the end of the previous sequence of the session (its answer or timeout; the session's
 //! start for the first) to the moment the task was sent to the tablet; a window
 //! counts when its midpoint lies in that period and it saw a face; each second is the mean of
@@ -14,10 +14,10 @@
 
 use super::{DataError, FieldError, InteractionRecord};
 use bag_file::{BagReader, Stamped};
-use qt_therapy_msgs::sequence_engagement::EngagementLog;
 use qt_therapy_msgs::topics::{EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT, TABLET_TASK};
 use qt_therapy_msgs::{ExpectedEngagement, SequenceResult};
 use sequence_game::{Feedback, Level, Outcome};
+use session_tally::EngagementLog;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 

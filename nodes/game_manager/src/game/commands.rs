@@ -9,22 +9,11 @@ use super::{CommandAnswer, Current, GameManager, PendingOverride, Phase, Session
 use crate::protocol::{LogLevel, Output};
 use crate::sequence::SessionRng;
 use crate::session_file::{JournalCommand, JournalEntry, SessionEnd};
-use qt_therapy_msgs::{GameState, TherapistCommand};
+use qt_therapy_msgs::{Command, GameState, TherapistCommand};
 use sequence_game::{Action, Feedback, Level, State};
 
 fn command_name(code: u8) -> &'static str {
-    match code {
-        TherapistCommand::START => "start",
-        TherapistCommand::PAUSE => "pause",
-        TherapistCommand::RESUME => "resume",
-        TherapistCommand::STOP => "stop",
-        TherapistCommand::OVERRIDE_LEVEL => "override level",
-        TherapistCommand::EMERGENCY_STOP => "emergency stop",
-        TherapistCommand::OVERRIDE_ENCOURAGING => "override: encouraging feedback",
-        TherapistCommand::OVERRIDE_CHALLENGING => "override: challenging feedback",
-        TherapistCommand::ACCEPT_PROPOSAL => "accept proposal",
-        _ => "unknown",
-    }
+    Command::try_from(code).map_or("unknown", Command::name)
 }
 
 impl GameManager {
@@ -35,23 +24,26 @@ impl GameManager {
             command_name(c.command),
             c.session_id
         );
-        if let Err(refusal) = self.check_command(&c) {
-            if let Some(s) = self.session.as_mut() {
-                s.rejected_commands += 1;
+        let kind = match self.check_command(&c) {
+            Ok(kind) => kind,
+            Err(refusal) => {
+                if let Some(s) = self.session.as_mut() {
+                    s.rejected_commands += 1;
+                }
+                let text = format!("{what}: {refusal}");
+                self.answered = CommandAnswer {
+                    session_id: c.session_id.clone(),
+                    command_id: c.command_id,
+                    outcome: match refusal {
+                        Refusal::AlreadyCarriedOut(_) => GameState::COMMAND_ALREADY_CARRIED_OUT,
+                        Refusal::Refused(_) => GameState::COMMAND_REFUSED,
+                    },
+                    refusal: refusal.to_string(),
+                };
+                self.reject(text, now);
+                return;
             }
-            let text = format!("{what}: {refusal}");
-            self.answered = CommandAnswer {
-                session_id: c.session_id.clone(),
-                command_id: c.command_id,
-                outcome: match refusal {
-                    Refusal::AlreadyCarriedOut(_) => GameState::COMMAND_ALREADY_CARRIED_OUT,
-                    Refusal::Refused(_) => GameState::COMMAND_REFUSED,
-                },
-                refusal: refusal.to_string(),
-            };
-            self.reject(text, now);
-            return;
-        }
+        };
         // Carried out: the state that shows its effect says so.
         self.answered = CommandAnswer {
             session_id: c.session_id.clone(),
@@ -59,7 +51,7 @@ impl GameManager {
             outcome: GameState::COMMAND_CARRIED_OUT,
             refusal: String::new(),
         };
-        if c.command == TherapistCommand::START {
+        if kind == Command::Start {
             self.start_session(&c, now);
             return;
         }
@@ -69,7 +61,7 @@ impl GameManager {
             s.last_command_id = last.max(c.command_id);
             (c.command_id <= last).then_some(last)
         });
-        if c.command == TherapistCommand::EMERGENCY_STOP {
+        if kind == Command::EmergencyStop {
             // Silence first; explain afterwards.
             self.end_session(
                 SessionEnd::EmergencyStopped,
@@ -85,52 +77,59 @@ impl GameManager {
             return;
         }
         self.log(LogLevel::INFO, format!("accepted {what}"));
-        match c.command {
-            TherapistCommand::PAUSE => {
+        match kind {
+            Command::Pause => {
                 self.journal_command(c.command_id, JournalCommand::Pause, None, now);
                 self.pause(c.command_id, now)
             }
-            TherapistCommand::RESUME => {
+            Command::Resume => {
                 self.journal_command(c.command_id, JournalCommand::Resume, None, now);
                 self.resume(c.command_id, now)
             }
-            TherapistCommand::STOP => self.end_session(
+            Command::Stop => self.end_session(
                 SessionEnd::Stopped,
                 &format!("stopped by the therapist (command {})", c.command_id),
                 now,
             ),
-            TherapistCommand::ACCEPT_PROPOSAL => {
+            Command::AcceptProposal => {
                 self.journal_command(c.command_id, JournalCommand::AcceptProposal, None, now);
                 let accepted = Settled::Accepted {
                     command_id: c.command_id,
                 };
                 self.settle_proposal(accepted, None, now);
             }
-            code => {
-                let action = match code {
-                    TherapistCommand::OVERRIDE_ENCOURAGING => Action::Encourage,
-                    TherapistCommand::OVERRIDE_CHALLENGING => Action::Challenge,
-                    _ => match Level::new(c.level.into()) {
-                        Ok(level) => Action::SetLevel(level),
-                        Err(_) => return,
-                    },
-                };
-                self.override_action(action, c.command_id, now)
+            Command::OverrideEncouraging => {
+                self.override_action(Action::Encourage, c.command_id, now)
             }
+            Command::OverrideChallenging => {
+                self.override_action(Action::Challenge, c.command_id, now)
+            }
+            Command::OverrideLevel => {
+                if let Ok(level) = Level::new(c.level.into()) {
+                    self.override_action(Action::SetLevel(level), c.command_id, now)
+                }
+            }
+            // Handled above.
+            Command::Start | Command::EmergencyStop => {}
         }
     }
 
-    /// Why a command cannot be carried out now, if it cannot.
-    fn check_command(&self, c: &TherapistCommand) -> Result<(), Refusal> {
-        if c.command > TherapistCommand::ACCEPT_PROPOSAL {
+    /// The command, or why it cannot be carried out now.
+    fn check_command(&self, c: &TherapistCommand) -> Result<Command, Refusal> {
+        let Ok(kind) = Command::try_from(c.command) else {
             return refuse(format!("unknown command code {}", c.command));
-        }
+        };
+        self.check_now(kind, c).map(|()| kind)
+    }
+
+    /// Why the command `kind` cannot be carried out now, if it cannot.
+    fn check_now(&self, kind: Command, c: &TherapistCommand) -> Result<(), Refusal> {
         if c.session_id.is_empty() {
             return refuse("session_id is empty");
         }
         let running = self.session_running();
         let session = self.session.as_ref();
-        if c.command == TherapistCommand::START {
+        if kind == Command::Start {
             if running && let Some(s) = session {
                 if s.id == c.session_id {
                     check_order(s, c)?;
@@ -171,19 +170,19 @@ impl GameManager {
         if !running {
             return refuse(format!("session has already ended ({})", self.ended_name()));
         }
-        if c.command != TherapistCommand::EMERGENCY_STOP {
+        if kind != Command::EmergencyStop {
             check_order(s, c)?;
         }
-        match c.command {
-            TherapistCommand::PAUSE if s.paused_since.is_some() => refuse("already paused"),
-            TherapistCommand::RESUME if s.paused_since.is_none() && s.held_since.is_some() => {
+        match kind {
+            Command::Pause if s.paused_since.is_some() => refuse("already paused"),
+            Command::Resume if s.paused_since.is_none() && s.held_since.is_some() => {
                 refuse(format!(
                     "held because a node is lost ({}): it can go on when the node is back",
                     self.lost_names()
                 ))
             }
-            TherapistCommand::RESUME if s.paused_since.is_none() => refuse("not paused"),
-            TherapistCommand::OVERRIDE_LEVEL => {
+            Command::Resume if s.paused_since.is_none() => refuse("not paused"),
+            Command::OverrideLevel => {
                 if Level::new(c.level.into()).is_err() {
                     return refuse(format!("level {} is not 1, 2 or 3", c.level));
                 }
@@ -192,7 +191,7 @@ impl GameManager {
                 }
                 Ok(())
             }
-            TherapistCommand::OVERRIDE_ENCOURAGING | TherapistCommand::OVERRIDE_CHALLENGING => {
+            Command::OverrideEncouraging | Command::OverrideChallenging => {
                 let target = self.override_target();
                 if target > self.sequences() {
                     return refuse("no sequence is left to override");
@@ -202,7 +201,7 @@ impl GameManager {
                 }
                 Ok(())
             }
-            TherapistCommand::ACCEPT_PROPOSAL if self.current.proposal.is_none() => {
+            Command::AcceptProposal if self.current.proposal.is_none() => {
                 refuse("no proposal is open (one that ran out was played)")
             }
             _ => Ok(()),

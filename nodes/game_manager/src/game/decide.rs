@@ -5,10 +5,10 @@
 use super::propose::{Settled, action_words};
 use super::{GameManager, Phase, Plan, PolicySilence, Timer};
 use crate::protocol::{LogLevel, Output};
-use qt_therapy_msgs::live_line::decision_reason;
 use qt_therapy_msgs::topics::BEHAVIOUR_POLICY_NODE;
 use qt_therapy_msgs::{BehaviourState, DecideActionRequest, DecideActionResponse, Validate};
 use sequence_game::{Action, Feedback, Level};
+use session_tally::live_line::decision_reason;
 
 /// A silence in the policy's heartbeat (10 Hz) that says it may be dead rather than slow:
 /// five heartbeats missed.

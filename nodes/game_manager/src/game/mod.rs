@@ -26,10 +26,10 @@ use crate::session_file::SessionEnd;
 use crate::utterances::Utterances;
 use heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
-use qt_therapy_msgs::sequence_engagement::EngagementLog;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
 use sequence_game::{Action, Emotion, Feedback, Level, State, UserModelTable};
+use session_tally::EngagementLog;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Where the game is (the GameState phase follows from it, PAUSED aside).

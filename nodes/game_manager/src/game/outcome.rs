@@ -6,11 +6,12 @@ use super::{Current, GameManager, Phase, Timer};
 use crate::protocol::Output;
 use crate::session_file::{SequenceRecord, SessionEnd, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
-use qt_therapy_msgs::live_line::sequence_line;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer, Tally};
+use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer};
 use sequence_game::{Emotion, State};
 use sequence_game::{parse_answer, score};
+use session_tally::Tally;
+use session_tally::live_line::sequence_line;
 
 impl GameManager {
     pub(super) fn on_answer(&mut self, a: TabletAnswer, now: i64) {

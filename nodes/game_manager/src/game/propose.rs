@@ -9,10 +9,10 @@
 use super::{GameManager, Phase, Plan, Timer};
 use crate::protocol::{LogLevel, Output};
 use qt_therapy_msgs::builtin_interfaces::Time;
-use qt_therapy_msgs::live_line::{level_and_feedback, proposal_answer, proposal_asked};
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, BehaviourState};
 use sequence_game::{Feedback, Level, ModelInput, UserModelTable};
+use session_tally::live_line::{level_and_feedback, proposal_answer, proposal_asked};
 use user_models::supervision::{self, ProposalRule};
 
 /// A proposal waiting for the therapist.
