@@ -272,7 +272,7 @@ impl GameManager {
                 at_ns: now,
             })));
         self.engagement.clear();
-        self.timers.clear();
+        self.timers.forget_all();
         self.current = Current::default();
         self.session = Some(Session {
             id: c.session_id.clone(),

@@ -15,6 +15,7 @@ mod recover;
 mod robot;
 #[cfg(test)]
 mod tests;
+mod timers;
 mod watch;
 
 pub use recover::RECOVERED_STATUS;
@@ -30,7 +31,8 @@ use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
 use sequence_game::{Action, Emotion, Feedback, Level, State, UserModelTable};
 use session_tally::EngagementLog;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeSet;
+use timers::{Fired, Timer, Timers};
 
 /// Where the game is (the GameState phase follows from it, PAUSED aside).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -44,27 +46,6 @@ enum Phase {
     /// Answer in (or timed out); waiting for the last engagement windows of the period.
     Settling,
     Ended(SessionEnd),
-}
-
-/// What a timer is for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Timer {
-    PolicyDeadline {
-        request_id: u64,
-    },
-    /// A second look at the policy's heartbeat, put off by a deadline that found it heard
-    /// too recently to tell a dead process from a slow one.
-    PolicyHeartbeatLook {
-        request_id: u64,
-    },
-    SpeechDone,
-    FeedbackDone,
-    Word(usize),
-    SequenceSaid,
-    AnswerTimeout,
-    Settled,
-    /// The open proposal's countdown ran out.
-    ProposalRunsOut,
 }
 
 /// The action chosen for the current sequence, and why.
@@ -172,13 +153,11 @@ pub struct GameManager {
     current: Current,
     used_sessions: BTreeSet<String>,
     engagement: EngagementLog,
-    timers: BTreeMap<u64, Timer>,
-    next_timer_id: u64,
+    /// The timers set (`timers.rs`).
+    timers: Timers,
     next_request_id: u64,
     /// The heartbeats of `watched_nodes`.
     watched: HeartbeatWatch,
-    /// The heartbeat watchdog's timer id, while one is set.
-    watchdog: Option<u64>,
     /// Watched names two processes beat under (a node started twice), as last shown.
     twins: Vec<Twins>,
     status: String,
@@ -217,11 +196,9 @@ impl GameManager {
             current: Current::default(),
             used_sessions: BTreeSet::new(),
             engagement: EngagementLog::default(),
-            timers: BTreeMap::new(),
-            next_timer_id: 1,
+            timers: Timers::new(),
             next_request_id: 1,
             watched,
-            watchdog: None,
             twins: Vec::new(),
             status: "waiting for a therapist to start a session".into(),
             answered: CommandAnswer::default(),
@@ -273,12 +250,11 @@ impl GameManager {
                 self.on_decision(request_id, Err(reason), now)
             }
             Input::Heartbeat(hb) => self.on_heartbeat(hb, now),
-            Input::TimerFired { id } if self.watchdog == Some(id) => self.on_watchdog(now),
-            Input::TimerFired { id } => {
-                if let Some(timer) = self.timers.remove(&id) {
-                    self.on_timer(timer, now);
-                }
-            }
+            Input::TimerFired { id } => match self.timers.fired(id) {
+                Fired::Watchdog => self.on_watchdog(now),
+                Fired::Game(timer) => self.on_timer(timer, now),
+                Fired::Stale => {}
+            },
             Input::RobotDone { step } => self.on_robot_done(step, now),
             Input::RobotFailed { step, reason } => self.on_robot_failed(step, &reason, now),
             Input::Shutdown { reason } => {
@@ -296,15 +272,13 @@ impl GameManager {
     }
 
     fn set_timer(&mut self, timer: Timer, at_ns: i64) {
-        let id = self.next_timer_id;
-        self.next_timer_id += 1;
-        self.timers.insert(id, timer);
-        self.out.push(Output::SetTimer { id, at_ns });
+        let set = self.timers.set(timer, at_ns);
+        self.out.push(set);
     }
 
     /// Forgets timers of one kind (they still fire, and are then ignored).
     fn drop_timers(&mut self, keep: impl Fn(&Timer) -> bool) {
-        self.timers.retain(|_, t| keep(t));
+        self.timers.forget_unless(keep);
     }
 
     fn paused(&self) -> bool {

@@ -193,7 +193,7 @@ impl GameManager {
             self.act(act);
         }
         self.withdraw_proposal(now);
-        self.timers.clear();
+        self.timers.forget_all();
         self.drop_robot_step();
         self.current = Current::default();
         let Some(s) = self.session.as_mut() else {

@@ -55,7 +55,7 @@ impl GameManager {
         let results: Vec<_> = r.records.iter().map(|x| x.result.clone()).collect();
         self.used_sessions.insert(r.session_id.clone());
         self.engagement.clear();
-        self.timers.clear();
+        self.timers.forget_all();
         self.current = Current {
             // No reaction is due: the sequence is presented as soon as the action is known.
             speech_done: true,

@@ -100,19 +100,12 @@ impl GameManager {
 
     /// Sets the watchdog for the watch's next deadline, unless one is set.
     fn arm_watchdog(&mut self) {
-        if self.watchdog.is_some() {
-            return;
-        }
         if let Some(at_ns) = self.watched.next_deadline_ns() {
-            let id = self.next_timer_id;
-            self.next_timer_id += 1;
-            self.watchdog = Some(id);
-            self.out.push(Output::SetTimer { id, at_ns });
+            self.out.extend(self.timers.set_watchdog(at_ns));
         }
     }
 
     pub(super) fn on_watchdog(&mut self, now: i64) {
-        self.watchdog = None;
         let lost: Vec<String> = self
             .watched
             .check(now)
