@@ -201,7 +201,7 @@ impl GameManager {
                 }
                 Ok(())
             }
-            Command::AcceptProposal if self.current.proposal.is_none() => {
+            Command::AcceptProposal if !self.proposals.is_open() => {
                 refuse("no proposal is open (one that ran out was played)")
             }
             _ => Ok(()),
@@ -273,6 +273,7 @@ impl GameManager {
             })));
         self.engagement.clear();
         self.timers.forget_all();
+        self.proposals.new_session();
         self.current = Current::default();
         self.session = Some(Session {
             id: c.session_id.clone(),
@@ -292,7 +293,6 @@ impl GameManager {
             closed_task: None,
             fallbacks: 0,
             overrides: 0,
-            proposals: Default::default(),
             rejected_commands: 0,
             rejected_answers: 0,
         });
@@ -394,7 +394,7 @@ impl GameManager {
                 // at recovery, when the policy may not be up), a request that ran out while
                 // the session was held or paused, or one still pending, which may have gone
                 // to a policy that died meanwhile (its answer, if any, is then superseded).
-                if self.phase == Phase::Deciding && self.current.proposal.is_some() {
+                if self.phase == Phase::Deciding && self.proposals.is_open() {
                     self.start_countdown(now);
                 } else if self.phase == Phase::Deciding && self.current.plan.is_none() {
                     self.ask_policy_again("the session goes on", now);

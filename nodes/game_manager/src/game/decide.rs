@@ -229,7 +229,7 @@ impl GameManager {
             && !self.paused()
             && self.phase == Phase::Deciding
             && self.current.plan.is_none()
-            && self.current.proposal.is_none()
+            && !self.proposals.is_open()
         {
             self.ask_policy_again("the policy is heard again", now);
         }

@@ -29,7 +29,7 @@ use heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GameState, SequenceResult};
-use sequence_game::{Action, Emotion, Feedback, Level, State, UserModelTable};
+use sequence_game::{Action, Emotion, Feedback, Level, State};
 use session_tally::EngagementLog;
 use std::collections::BTreeSet;
 use timers::{Fired, Timer, Timers};
@@ -77,8 +77,6 @@ struct Current {
     /// keeps missing deadlines cannot postpone the fallback for ever.
     policy_silence: PolicySilence,
     plan: Option<Plan>,
-    /// The policy's plan, waiting for the therapist (supervised autonomy).
-    proposal: Option<propose::OpenProposal>,
     speech_done: bool,
     feedback_line: Option<usize>,
     sequence: Vec<Emotion>,
@@ -121,7 +119,6 @@ struct Session {
     closed_task: Option<(u32, bool)>,
     fallbacks: u32,
     overrides: u32,
-    proposals: ProposalCounts,
     rejected_commands: u32,
     rejected_answers: u32,
 }
@@ -133,15 +130,6 @@ struct PendingOverride {
     action: Action,
     /// The command that set it (0: from a recovered journal): a proposal it replaces names it.
     command_id: u64,
-}
-
-/// What became of a session's proposals.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct ProposalCounts {
-    proposed: u32,
-    accepted: u32,
-    replaced: u32,
-    timed_out: u32,
 }
 
 /// The game manager core.
@@ -165,8 +153,8 @@ pub struct GameManager {
     answered: CommandAnswer,
     /// The robot's steps and calls (`robot.rs`).
     robot: robot::RobotSteps,
-    /// The user models' tables the σ rule of supervised autonomy reads (empty: rule off).
-    user_models: Vec<UserModelTable>,
+    /// Supervised autonomy's proposals (`propose.rs`).
+    proposals: propose::ProposalDesk,
     out: Vec<Output>,
 }
 
@@ -184,6 +172,7 @@ impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
         let robot = robot::RobotSteps::new(params.robot_backend()?);
+        let proposals = propose::ProposalDesk::new(&params);
         let watched = HeartbeatWatch::with_timeout_s(
             params.watched_nodes.iter().cloned(),
             params.node_loss_timeout_s,
@@ -203,7 +192,7 @@ impl GameManager {
             status: "waiting for a therapist to start a session".into(),
             answered: CommandAnswer::default(),
             robot,
-            user_models: Vec::new(),
+            proposals,
             out: Vec::new(),
         })
     }

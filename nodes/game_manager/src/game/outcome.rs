@@ -196,6 +196,7 @@ impl GameManager {
         self.timers.forget_all();
         self.drop_robot_step();
         self.current = Current::default();
+        let proposals = self.proposals.counts();
         let Some(s) = self.session.as_mut() else {
             return;
         };
@@ -217,10 +218,10 @@ impl GameManager {
             max_score: tally.max_score,
             mean_engagement: tally.mean_engagement,
             overrides: s.overrides,
-            proposals: s.proposals.proposed,
-            proposals_accepted: s.proposals.accepted,
-            proposals_replaced: s.proposals.replaced,
-            proposals_timed_out: s.proposals.timed_out,
+            proposals: proposals.proposed,
+            proposals_accepted: proposals.accepted,
+            proposals_replaced: proposals.replaced,
+            proposals_timed_out: proposals.timed_out,
             policy_fallbacks: s.fallbacks,
             rejected_commands: s.rejected_commands,
             rejected_answers: s.rejected_answers,

@@ -56,6 +56,8 @@ impl GameManager {
         self.used_sessions.insert(r.session_id.clone());
         self.engagement.clear();
         self.timers.forget_all();
+        // Only the session file's records come back; proposals live in the bag.
+        self.proposals.new_session();
         self.current = Current {
             // No reaction is due: the sequence is presented as soon as the action is known.
             speech_done: true,
@@ -78,8 +80,6 @@ impl GameManager {
             closed_task: None,
             fallbacks: r.records.iter().filter(|x| x.policy_fallback).count() as u32,
             overrides: results.iter().filter(|x| x.overridden).count() as u32,
-            // Only the session file's records come back; proposals live in the bag.
-            proposals: Default::default(),
             rejected_commands: 0,
             rejected_answers: r.records.iter().map(|x| x.rejected_answers).sum(),
             results,
