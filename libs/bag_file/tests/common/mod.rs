@@ -220,6 +220,8 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
         ActionProposal {
             header: header(50),
             session_id: session_id.clone(),
+            // The game manager's clock when it proposed: the header's stamp here.
+            proposal_id: START_NS + 50 * MS,
             step: 1,
             state: state.clone(),
             action: 0,
