@@ -1,6 +1,7 @@
 //! The subcommands of the `behaviour_policy` binary, one module each, and what they share:
 //! the learning constants on the command line and loading user models.
 
+pub mod child_study;
 pub mod evaluate;
 pub mod experiments;
 pub mod per_child;

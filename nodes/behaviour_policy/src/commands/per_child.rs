@@ -5,12 +5,12 @@
 //! child. Prints the policies' means, the paired comparisons and the per-child table; writes
 //! them as CSV with every session, and the figures.
 
+use super::child_study::ChildStudyArgs;
 use super::{LearningArgs, parse_reward};
-use anyhow::{Context, bail};
+use anyhow::Context;
 use behaviour_policy::Reward;
 use behaviour_policy::per_child::{
-    Arm, COMPARISONS, ChildResult, StudySpec, Window, cases, child_mean, mean_over_children,
-    paired, run_study,
+    Arm, COMPARISONS, ChildResult, Window, cases, child_mean, mean_over_children, paired, run_study,
 };
 use behaviour_policy::plot::{per_child_paired_svg, per_child_svg};
 use behaviour_policy::stats::{Interval, PairedComparison, PairedSummary, Verdict, mean};
@@ -19,33 +19,12 @@ use std::path::PathBuf;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
-    /// The study's records (the paper's: 20 participants, 10 sequences each).
-    #[arg(long, default_value = "../shared/data/migrave-study")]
-    study: PathBuf,
-    /// Clusters of the user models fitted without each child.
-    #[arg(long, default_value_t = 2)]
-    clusters: usize,
+    #[command(flatten)]
+    study: ChildStudyArgs,
     #[arg(long, default_value = "RE+bE", value_parser = parse_reward)]
     reward: Reward,
     #[command(flatten)]
     learning: LearningArgs,
-    /// Sessions each child plays with each policy.
-    #[arg(long, default_value_t = 20)]
-    sessions: usize,
-    /// Repetitions per child: each its own random draws, the same for every policy.
-    #[arg(long, default_value_t = 30)]
-    seeds: usize,
-    /// The cluster's policy is pretrained as the node does: runs x epochs x 100 sessions.
-    #[arg(long, default_value_t = 100)]
-    pretrain_epochs: usize,
-    #[arg(long, default_value_t = 5)]
-    pretrain_runs: usize,
-    /// Bootstrap resamples of the children for the paired intervals.
-    #[arg(long, default_value_t = 10_000)]
-    bootstrap: usize,
-    /// Seed of the fits (K-means), of every simulated session and of the bootstrap.
-    #[arg(long, default_value_t = 7)]
-    seed: u64,
     #[arg(long, default_value = "out/per_child")]
     output: PathBuf,
 }
@@ -344,34 +323,10 @@ fn report(results: &[ChildResult], sessions: usize, bootstrap: usize, seed: u64)
     }
 }
 
-pub fn run(a: Args) -> anyhow::Result<()> {
-    let learning = a.learning.learning(a.reward)?;
-    if a.sessions == 0 || a.seeds == 0 || a.pretrain_epochs == 0 || a.pretrain_runs == 0 {
-        bail!("--sessions, --seeds, --pretrain-epochs and --pretrain-runs must be at least 1");
-    }
-    if !a.study.is_dir() {
-        bail!(
-            "{}: no such folder (the study's records; ../shared/data/migrave-study beside the \
-             repository, or --study DIR)",
-            a.study.display()
-        );
-    }
-    let records = user_models::data::study::read_study(&a.study)
-        .with_context(|| format!("reading the study in {}", a.study.display()))?;
-    let spec = StudySpec {
-        fit: user_models::FitOptions {
-            clusters: a.clusters,
-            seed: a.seed,
-            provenance: format!("{} without one child", a.study.display()),
-            ..Default::default()
-        },
-        learning,
-        pretrain_epochs: a.pretrain_epochs,
-        pretrain_runs: a.pretrain_runs,
-        sessions: a.sessions,
-        seeds: a.seeds,
-        seed: a.seed,
-    };
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let learning = args.learning.learning(args.reward)?;
+    let (records, spec) = args.study.read(learning)?;
+    let a = &args.study;
     let started = std::time::Instant::now();
     let cases = cases(&records, &spec.fit).context("fitting the leave-one-child-out models")?;
     println!(
@@ -393,11 +348,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let r = report(&results, a.sessions, a.bootstrap, a.seed);
     print!("{}", r.text);
-    std::fs::create_dir_all(&a.output)
-        .with_context(|| format!("creating {}", a.output.display()))?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
     let mut written = Vec::new();
     for (name, text) in &r.files {
-        let path = a.output.join(name);
+        let path = args.output.join(name);
         atomic_file::write(&path, text.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
         written.push(path);
@@ -411,7 +366,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     let svg = per_child_svg(&results, &subtitle).map_err(|e| anyhow::anyhow!("drawing: {e}"))?;
     written.extend(<[PathBuf; 2]>::from(figures::write_svg_and_png(
-        &a.output.join("per_child"),
+        &args.output.join("per_child"),
         &svg,
     )?));
     let all_sessions = &Window::standard(a.sessions)[0];
@@ -430,7 +385,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let svg = per_child_paired_svg(&score_all, "difference in score per session", &subtitle)
         .map_err(|e| anyhow::anyhow!("drawing: {e}"))?;
     written.extend(<[PathBuf; 2]>::from(figures::write_svg_and_png(
-        &a.output.join("per_child_paired"),
+        &args.output.join("per_child_paired"),
         &svg,
     )?));
     println!(
@@ -450,6 +405,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 mod tests {
     use super::*;
     use behaviour_policy::Learning;
+    use behaviour_policy::per_child::StudySpec;
     use user_models::simulate::{StudySpec as SyntheticStudy, simulate_study};
 
     #[test]

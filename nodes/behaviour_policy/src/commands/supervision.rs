@@ -5,9 +5,9 @@
 //! rule's summary) and supervision.csv (per child and rule: proposals, replaced and score per
 //! session, and the score protected).
 
-use anyhow::{Context, bail};
+use super::child_study::ChildStudyArgs;
+use anyhow::Context;
 use behaviour_policy::mdp::Objective;
-use behaviour_policy::per_child::StudySpec;
 use behaviour_policy::stats::PairedComparison;
 use behaviour_policy::supervision::{
     ChildSupervision, Sigma, Supervised, Trigger, TriggerSummary, cases, matched_random, paired,
@@ -19,34 +19,13 @@ use std::path::PathBuf;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct Args {
-    /// The study's records (the paper's: 20 participants, 10 sequences each).
-    #[arg(long, default_value = "../shared/data/migrave-study")]
-    study: PathBuf,
-    /// Clusters of the user models fitted without each child.
-    #[arg(long, default_value_t = 2)]
-    clusters: usize,
-    /// Sessions each child plays under each rule.
-    #[arg(long, default_value_t = 20)]
-    sessions: usize,
-    /// Repetitions per child: each its own draws, the same for every rule.
-    #[arg(long, default_value_t = 30)]
-    seeds: usize,
-    /// The cluster's policy is pretrained as the node does: runs x epochs x 100 sessions.
-    #[arg(long, default_value_t = 100)]
-    pretrain_epochs: usize,
-    #[arg(long, default_value_t = 5)]
-    pretrain_runs: usize,
-    /// Bootstrap resamples of the children for the paired intervals.
-    #[arg(long, default_value_t = 10_000)]
-    bootstrap: usize,
+    #[command(flatten)]
+    study: ChildStudyArgs,
     /// What the simulated therapist plays at a proposal: the child's `score`-optimal action
     /// (the score a proposal protects), or their `return`-optimal one (the policy's own
     /// objective, engagement included).
     #[arg(long, default_value = "score", value_parser = parse_objective)]
     therapist: Objective,
-    /// Seed of the fits (K-means), of every simulated session and of the bootstrap.
-    #[arg(long, default_value_t = 7)]
-    seed: u64,
     #[arg(long, default_value = "out/supervision")]
     output: PathBuf,
 }
@@ -163,45 +142,23 @@ fn csv(results: &[ChildSupervision], triggers: &[Trigger]) -> String {
     out
 }
 
-pub fn run(a: Args) -> anyhow::Result<()> {
-    if a.sessions == 0 || a.seeds == 0 {
-        bail!("--sessions and --seeds must be at least 1");
-    }
-    if !a.study.is_dir() {
-        bail!(
-            "{}: no such folder (the MigrAVE study sits beside the repository, or --study DIR)",
-            a.study.display()
-        );
-    }
-    let records = user_models::data::study::read_study(&a.study)
-        .with_context(|| format!("reading the study in {}", a.study.display()))?;
-    let spec = StudySpec {
-        fit: user_models::FitOptions {
-            clusters: a.clusters,
-            seed: a.seed,
-            provenance: format!("{} without one child", a.study.display()),
-            ..Default::default()
-        },
-        learning: Learning {
-            reward: Reward::RePlusBetaE,
-            ..Learning::default()
-        },
-        pretrain_epochs: a.pretrain_epochs,
-        pretrain_runs: a.pretrain_runs,
-        sessions: a.sessions,
-        seeds: a.seeds,
-        seed: a.seed,
-    };
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // The policy the node runs: RE + βE with the authors' constants.
+    let (records, spec) = args.study.read(Learning {
+        reward: Reward::RePlusBetaE,
+        ..Learning::default()
+    })?;
+    let a = &args.study;
     let started = std::time::Instant::now();
     let cases = cases(&records, &spec.fit).context("fitting the leave-one-out models")?;
     let rules = triggers();
     let bar = super::progress_bar(2 * cases.len() as u64);
-    let first = run_study(&cases, &spec, &rules, a.therapist, &|| bar.inc(1));
+    let first = run_study(&cases, &spec, &rules, args.therapist, &|| bar.inc(1));
     // Then, for each rule, proposals at random at its rate: on the same children and draws.
     let matched = matched_random(&summarise(&first, &rules, 0, 0, a.seed));
     let mut triggers = rules.clone();
     triggers.extend(matched.iter().flatten());
-    let results = run_study(&cases, &spec, &triggers, a.therapist, &|| bar.inc(1));
+    let results = run_study(&cases, &spec, &triggers, args.therapist, &|| bar.inc(1));
     bar.finish_and_clear();
     let summary = summarise(&results, &triggers, 0, a.bootstrap, a.seed);
     let mut next = rules.len();
@@ -225,7 +182,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.pretrain_epochs,
         a.sessions,
         a.seeds,
-        match a.therapist {
+        match args.therapist {
             Objective::Score => "score",
             Objective::Return => "return",
         },
@@ -249,12 +206,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             );
         }
     }
-    std::fs::create_dir_all(&a.output)
-        .with_context(|| format!("creating {}", a.output.display()))?;
-    let json = a.output.join("supervision.json");
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let json = args.output.join("supervision.json");
     atomic_file::write(&json, serde_json::to_string_pretty(&summary)?.as_bytes())
         .with_context(|| format!("writing {}", json.display()))?;
-    let csv_path = a.output.join("supervision.csv");
+    let csv_path = args.output.join("supervision.csv");
     atomic_file::write(&csv_path, csv(&results, &triggers).as_bytes())
         .with_context(|| format!("writing {}", csv_path.display()))?;
     println!("wrote {} and {}", json.display(), csv_path.display());
