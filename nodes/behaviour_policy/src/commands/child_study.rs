@@ -26,6 +26,7 @@ pub struct ChildStudyArgs {
     /// The cluster's policy is pretrained as the node does: runs x epochs x 100 sessions.
     #[arg(long, default_value_t = 100)]
     pub pretrain_epochs: usize,
+    /// Pretraining runs; the best by its last epoch's return is kept.
     #[arg(long, default_value_t = 5)]
     pub pretrain_runs: usize,
     /// Bootstrap resamples of the children for the paired intervals.

@@ -25,6 +25,7 @@ pub struct Args {
     reward: Reward,
     #[command(flatten)]
     learning: LearningArgs,
+    /// Where the CSV files and the figures go.
     #[arg(long, default_value = "out/per_child")]
     output: PathBuf,
 }

@@ -26,6 +26,7 @@ pub struct Args {
     /// objective, engagement included).
     #[arg(long, default_value = "score", value_parser = parse_objective)]
     therapist: Objective,
+    /// Where supervision.json and supervision.csv go.
     #[arg(long, default_value = "out/supervision")]
     output: PathBuf,
 }
