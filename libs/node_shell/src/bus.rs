@@ -151,6 +151,44 @@ impl<S: ServiceDefinition> ServiceCall<S> {
     }
 }
 
+/// What became of a request a server took: one rule for both buses' servers.
+pub(crate) enum Handed<R> {
+    /// The response to send: the node's, or `invalid(reason)` for a request that failed
+    /// validation (logged in the drop log, never shown to the node).
+    Answer(R),
+    /// The node dropped the call without answering: nothing to send.
+    Unanswered,
+    /// The node no longer takes calls: the server stops.
+    NodeGone,
+}
+
+/// Validates `request`; an invalid one is answered `invalid(reason)` and recorded in `drops`
+/// under `service`, a valid one goes to the node on `node` and its answer is awaited (so the
+/// node takes its requests one at a time).
+pub(crate) async fn hand_to_node<S: ServiceDefinition>(
+    request: S::Request,
+    node: &mpsc::Sender<ServiceCall<S>>,
+    drops: &DropLog,
+    service: &str,
+    invalid: fn(&InvalidMessage) -> S::Response,
+) -> Handed<S::Response>
+where
+    S::Request: Validate,
+{
+    if let Err(e) = request.validate() {
+        drops.record(service, &e.to_string());
+        return Handed::Answer(invalid(&e));
+    }
+    let (responder, answer) = oneshot::channel();
+    if node.send(ServiceCall { request, responder }).await.is_err() {
+        return Handed::NodeGone;
+    }
+    match answer.await {
+        Ok(response) => Handed::Answer(response),
+        Err(_) => Handed::Unanswered,
+    }
+}
+
 /// Why a service call gave no answer.
 #[derive(Debug, thiserror::Error)]
 pub enum CallError {

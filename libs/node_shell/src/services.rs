@@ -3,7 +3,7 @@
 //! server, which works around ros2-client's dropped discovery events.
 
 use crate::NodeShell;
-use crate::bus::{Caller, ServiceCall, ServiceClient};
+use crate::bus::{Caller, Handed, ServiceCall, ServiceClient, hand_to_node};
 use crate::names::ros_name;
 use crate::qos::service_qos;
 use anyhow::Context as _;
@@ -13,7 +13,7 @@ use qt_therapy_msgs::{InvalidMessage, Validate};
 use ros2_client::ServiceTypeName;
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
 impl NodeShell {
     /// Serves a service: validated requests arrive on the channel with a responder; invalid
@@ -49,21 +49,10 @@ impl NodeShell {
                         continue;
                     }
                 };
-                let response = match request.validate() {
-                    Err(e) => {
-                        drops.record(name, &e.to_string());
-                        invalid(&e)
-                    }
-                    Ok(()) => {
-                        let (responder, answer) = oneshot::channel();
-                        if tx.send(ServiceCall { request, responder }).await.is_err() {
-                            break;
-                        }
-                        match answer.await {
-                            Ok(response) => response,
-                            Err(_) => continue,
-                        }
-                    }
+                let response = match hand_to_node(request, &tx, &drops, name, invalid).await {
+                    Handed::Answer(response) => response,
+                    Handed::Unanswered => continue,
+                    Handed::NodeGone => break,
                 };
                 if let Err(e) = server.async_send_response(id, response).await {
                     tracing::warn!(service = name, "could not send a response: {e:?}");

@@ -2,7 +2,7 @@
 //! as over DDS; a call goes to every server of the name and the first answer wins.
 
 use super::{Entity, Inbox, Leave, Shared};
-use crate::bus::ServiceCall;
+use crate::bus::{Handed, ServiceCall, hand_to_node};
 use crate::drops::DropLog;
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::Service;
@@ -10,7 +10,7 @@ use qt_therapy_msgs::{InvalidMessage, MessageDefinition, Validate};
 use std::any::Any;
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
 pub(crate) struct ServiceEntry {
     type_name: String,
@@ -112,21 +112,10 @@ where
         let _leave = leave;
         loop {
             let Request::<S> { request, reply } = inbox.pop().await;
-            let response = match request.validate() {
-                Err(e) => {
-                    drops.record(name, &e.to_string());
-                    invalid(&e)
-                }
-                Ok(()) => {
-                    let (responder, answer) = oneshot::channel();
-                    if tx.send(ServiceCall { request, responder }).await.is_err() {
-                        break;
-                    }
-                    match answer.await {
-                        Ok(response) => response,
-                        Err(_) => continue,
-                    }
-                }
+            let response = match hand_to_node(request, &tx, &drops, name, invalid).await {
+                Handed::Answer(response) => response,
+                Handed::Unanswered => continue,
+                Handed::NodeGone => break,
             };
             // The caller may have stopped waiting.
             let _ = reply.try_send(response);
