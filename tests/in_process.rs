@@ -11,12 +11,13 @@ mod suite;
 
 use bag_file::BagReader;
 use qt_therapy_msgs::topics::{
-    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, SEQUENCE_RESULT, TABLET_ANSWER, THERAPIST_COMMAND,
+    DECISION, GAME_STATE, SEQUENCE_RESULT, TABLET_ANSWER, THERAPIST_COMMAND,
 };
-use qt_therapy_msgs::{Decision, ExpectedEngagement, GameState, SequenceResult, TherapistCommand};
+use qt_therapy_msgs::{Decision, GameState, SequenceResult, TherapistCommand};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use suite::{Node, Setup, Suite, virtual_time};
+use suite_tests::{SessionBag, whole_session_bag};
 
 /// A directory of this test's own (the policy's decisions name their Q-table file, so two runs
 /// compared byte for byte write to the same place); removed by [`done`] when the test passed.
@@ -100,43 +101,8 @@ fn a_whole_session_in_process_is_the_main_job() {
     );
     assert!(context.contains("finished: 10 sequences"), "{context}");
 
-    let reader = BagReader::open(&out.join("session.mcap")).expect("the recorder's bag");
-    let results: Vec<SequenceResult> = reader
-        .messages(SEQUENCE_RESULT.name)
-        .expect("results")
-        .into_iter()
-        .map(|s| s.message)
-        .collect();
-    assert_eq!(
-        results.iter().map(|r| r.sequence_index).collect::<Vec<_>>(),
-        (1..=10).collect::<Vec<u8>>(),
-        "{context}"
-    );
-    let session = &results[0].session_id;
-    assert!(
-        results
-            .iter()
-            .all(|r| &r.session_id == session && r.sequence.len() == 2 * usize::from(r.level) + 1)
-    );
-    assert!(
-        results.iter().filter(|r| !r.timed_out).count() >= 8,
-        "{context}"
-    );
-    let engagement: Vec<ExpectedEngagement> = reader
-        .messages(EXPECTED_ENGAGEMENT.name)
-        .expect("engagement")
-        .into_iter()
-        .map(|s| s.message)
-        .collect();
-    assert!(engagement.iter().filter(|e| e.has_faces).count() >= 10);
-    let decisions: Vec<Decision> = reader
-        .messages(DECISION.name)
-        .expect("decisions")
-        .into_iter()
-        .map(|s| s.message)
-        .collect();
+    let SessionBag { decisions, .. } = whole_session_bag(&out.join("session.mcap"), &context);
     assert_eq!(decisions.len(), 10, "{context}");
-    assert!(decisions.iter().all(|d| d.step != 1 || d.feedback == 0));
     eprintln!("{context}");
     done(&out);
 }

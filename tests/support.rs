@@ -32,3 +32,67 @@ pub fn json_lines(text: &str) -> Vec<serde_json::Value> {
         .filter_map(|l| serde_json::from_str(l.trim()).ok())
         .collect()
 }
+
+/// A whole session's bag as both main-job tests (over DDS and in one process) read it: its
+/// results, seconds of engagement and decisions.
+pub struct SessionBag {
+    pub results: Vec<qt_therapy_msgs::SequenceResult>,
+    pub engagement: Vec<qt_therapy_msgs::ExpectedEngagement>,
+    pub decisions: Vec<qt_therapy_msgs::Decision>,
+}
+
+/// Reads `bag` and checks what every whole simulated session's bag holds: the ten results of
+/// one session in order, each sequence as long as its level says, at least 8 answered (the
+/// simulated child answers), at least 10 seconds with a face (the classifier saw it), and no
+/// feedback before the first sequence. `context` ends each failure's message.
+pub fn whole_session_bag(bag: &std::path::Path, context: &str) -> SessionBag {
+    use qt_therapy_msgs::topics::{DECISION, EXPECTED_ENGAGEMENT, SEQUENCE_RESULT};
+    let reader = bag_file::BagReader::open(bag).expect("the recorder wrote a readable bag");
+    let results: Vec<qt_therapy_msgs::SequenceResult> = reader
+        .messages(SEQUENCE_RESULT.name)
+        .expect("results")
+        .into_iter()
+        .map(|s| s.message)
+        .collect();
+    assert_eq!(
+        results.iter().map(|r| r.sequence_index).collect::<Vec<_>>(),
+        (1..=10).collect::<Vec<u8>>(),
+        "{context}"
+    );
+    let session = &results[0].session_id;
+    assert!(
+        results
+            .iter()
+            .all(|r| &r.session_id == session && r.sequence.len() == 2 * usize::from(r.level) + 1)
+    );
+    assert!(
+        results.iter().filter(|r| !r.timed_out).count() >= 8,
+        "{context}"
+    );
+    let engagement: Vec<qt_therapy_msgs::ExpectedEngagement> = reader
+        .messages(EXPECTED_ENGAGEMENT.name)
+        .expect("engagement")
+        .into_iter()
+        .map(|s| s.message)
+        .collect();
+    assert!(
+        engagement.iter().filter(|e| e.has_faces).count() >= 10,
+        "{} seconds with faces",
+        engagement.len()
+    );
+    let decisions: Vec<qt_therapy_msgs::Decision> = reader
+        .messages(DECISION.name)
+        .expect("decisions")
+        .into_iter()
+        .map(|s| s.message)
+        .collect();
+    assert!(
+        decisions.iter().all(|d| d.step != 1 || d.feedback == 0),
+        "no feedback on the first sequence"
+    );
+    SessionBag {
+        results,
+        engagement,
+        decisions,
+    }
+}
