@@ -1,169 +1,62 @@
 //! The bridge's sans-IO core. It is fed page messages (per connection), DDS messages and the
 //! time, and returns what to publish on DDS and what to send to which page. Everything a
-//! tablet sends is checked here: rate, size, schema, PIN, and the game it refers to.
+//! tablet sends is checked here: rate, size, schema and PIN, then by the part of the core it
+//! is for. The parts keep their own state and know nothing of each other or of the pages'
+//! connections: the child's task (`child`), the therapist's commands (`therapist`), the
+//! proposals (`proposal`), the session so far (`game`) and the game manager's heartbeat
+//! (`watch`); this is where what they say is sent to the pages.
 
-use crate::limits::TokenBucket;
+use crate::child::ChildTask;
+use crate::connections::Connections;
+use crate::game::GameHistory;
+use crate::io::{ClientId, DdsInput, Now, Output, log};
 use crate::params::TabletBridgeParams;
-use crate::proposal::KeptProposal;
-use crate::protocol::{
-    ClientMessage, CommandKind, DecisionView, EngagementPoint, ResultView, Role, ServerMessage,
-    TaskView, parse_client_message,
-};
-use crate::therapist::CommandIds;
+use crate::proposal::Proposals;
+use crate::protocol::{ClientMessage, CommandKind, Role, ServerMessage};
+use crate::therapist::{CommandFields, Commands, Made};
 use crate::watch::GameManagerWatch;
-use qt_therapy_msgs::{
-    ActionProposal, Decision, ExpectedEngagement, GameState, Heartbeat, SequenceResult,
-    TabletAnswer, TabletTask, TherapistCommand,
-};
-use std::collections::{BTreeMap, VecDeque};
+use qt_therapy_msgs::GameState;
 use std::time::Duration;
 use tracing::Level;
 
-/// One WebSocket connection, numbered by the bridge.
-pub type ClientId = u64;
-
-/// The time, as the caller's clock tells it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Now {
-    /// Monotonic time (rate limits, timeouts).
-    pub monotonic: Duration,
-    /// Wall-clock nanoseconds since the epoch (message headers, session and command ids).
-    pub wall_nanos: i64,
-}
-
-/// What the core asks its shell to do.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Output {
-    Send(ClientId, ServerMessage),
-    /// Close the connection; the reason was already sent as a `rejected` message.
-    Close(ClientId, String),
-    Command(TherapistCommand),
-    Answer(TabletAnswer),
-    /// A line for the log (the shell logs it with `node_shell::logging::log_at`).
-    Log(Level, String),
-}
-
-/// A log line as an output.
-pub(crate) fn log(level: Level, message: String) -> Output {
-    Output::Log(level, message)
-}
-
-/// A DDS message the bridge listens to.
-#[derive(Debug, Clone)]
-pub enum DdsInput {
-    GameState(GameState),
-    Task(TabletTask),
-    Decision(Decision),
-    Engagement(ExpectedEngagement),
-    Result(SequenceResult),
-    /// The game manager's proposal (supervised autonomy), for the therapist page only.
-    Proposal(ActionProposal),
-    /// Any node's heartbeat; the game manager's are watched.
-    Heartbeat(Heartbeat),
-}
-
-/// At most one "too many messages" notice per connection per this long.
-const NOTICE_INTERVAL: Duration = Duration::from_secs(1);
-
-pub(crate) struct Client {
-    pub role: Role,
-    bucket: TokenBucket,
-    pub logged_in: bool,
-    pub pin_failures: u32,
-    dropped_in_a_row: u32,
-    last_notice: Option<Duration>,
-}
-
-pub(crate) struct OpenTask {
-    pub task: TabletTask,
-    pub received: Duration,
-    pub answered: bool,
-}
-
 /// The bridge's state between messages.
 pub struct Bridge {
-    pub(crate) params: TabletBridgeParams,
-    pub(crate) clients: BTreeMap<ClientId, Client>,
-    next_id: ClientId,
-    pub(crate) game: Option<GameState>,
-    pub(crate) task: Option<OpenTask>,
-    /// (session, sequence_id) of the newest task seen, so re-delivered tasks stay closed.
-    pub(crate) last_task: Option<(String, u32)>,
-    pub(crate) engagement: VecDeque<EngagementPoint>,
-    pub(crate) decisions: VecDeque<DecisionView>,
-    pub(crate) results: VecDeque<ResultView>,
-    /// The results of the session the newest result belongs to, for its running tally.
-    pub(crate) session_results: Vec<SequenceResult>,
-    /// The newest proposal of the game's session, open or settled.
-    pub(crate) proposal: Option<KeptProposal>,
-    /// Every proposal message taken, by the suite's rule for what arrives twice
-    /// (`session_log`): one delivered again must not start its countdown again.
-    pub(crate) proposals_taken: session_log::Once<ActionProposal>,
-    /// The session commands go to: the game's, or the one this bridge just started.
-    pub(crate) current_session: Option<String>,
-    pub(crate) command_ids: CommandIds,
-    /// Wrong PINs left over all connections; refilled over a minute.
-    pub(crate) pin_budget: TokenBucket,
-    pub(crate) last_emergency_stop: Option<(String, Duration)>,
-    pub(crate) gm_watch: GameManagerWatch,
+    params: TabletBridgeParams,
+    connections: Connections,
+    /// The game's state, as the game manager last published it.
+    game: Option<GameState>,
+    history: GameHistory,
+    task: ChildTask,
+    proposals: Proposals,
+    commands: Commands,
+    gm_watch: GameManagerWatch,
 }
 
 impl Bridge {
     /// A bridge with validated `params`, started at `now`.
     pub fn new(params: TabletBridgeParams, now: Now) -> Self {
-        let failures = f64::from(params.pin_max_failures);
-        let gm_watch = GameManagerWatch::new(params.game_manager_loss_timeout_s);
         Bridge {
-            pin_budget: TokenBucket::new(failures, failures / 60.0, now.monotonic),
+            connections: Connections::new(&params, now),
+            gm_watch: GameManagerWatch::new(params.game_manager_loss_timeout_s),
             params,
-            clients: BTreeMap::new(),
-            next_id: 1,
             game: None,
-            task: None,
-            last_task: None,
-            engagement: VecDeque::new(),
-            decisions: VecDeque::new(),
-            results: VecDeque::new(),
-            session_results: Vec::new(),
-            proposal: None,
-            proposals_taken: session_log::Once::new(),
-            current_session: None,
-            command_ids: CommandIds::default(),
-            last_emergency_stop: None,
-            gm_watch,
+            history: GameHistory::default(),
+            task: ChildTask::default(),
+            proposals: Proposals::default(),
+            commands: Commands::default(),
         }
     }
 
     /// A page connected. Refused (with the reason) when too many are connected.
     pub fn connect(&mut self, role: Role, now: Now) -> Result<(ClientId, Vec<Output>), String> {
-        if self.clients.len() >= self.params.max_clients {
-            let reason = format!(
-                "too many tablet connections (at most {})",
-                self.params.max_clients
-            );
-            return Err(reason);
-        }
-        let id = self.next_id;
-        self.next_id += 1;
-        let burst = f64::from(self.params.ws_burst);
-        self.clients.insert(
-            id,
-            Client {
-                role,
-                bucket: TokenBucket::new(burst, self.params.ws_messages_per_second, now.monotonic),
-                logged_in: false,
-                pin_failures: 0,
-                dropped_in_a_row: 0,
-                last_notice: None,
-            },
-        );
+        let id = self.connections.open(role, &self.params, now)?;
         let mut out = vec![log(Level::INFO, format!("page {id} ({role:?}) connected"))];
         match role {
             Role::Child => {
-                if let Some(v) = self.child_view() {
+                if let Some(v) = self.gm_watch.child_view(self.game.as_ref()) {
                     out.push(Output::Send(id, ServerMessage::Game(v)));
                 }
-                out.push(Output::Send(id, self.child_task_message()));
+                out.push(Output::Send(id, self.task.message()));
             }
             Role::Therapist => out.push(Output::Send(id, ServerMessage::LoginRequired)),
         }
@@ -171,10 +64,10 @@ impl Bridge {
     }
 
     pub fn disconnect(&mut self, id: ClientId) -> Vec<Output> {
-        match self.clients.remove(&id) {
-            Some(c) => vec![log(
+        match self.connections.close(id) {
+            Some(role) => vec![log(
                 Level::INFO,
-                format!("page {id} ({:?}) disconnected", c.role),
+                format!("page {id} ({role:?}) disconnected"),
             )],
             None => Vec::new(),
         }
@@ -183,97 +76,22 @@ impl Bridge {
     /// A binary WebSocket frame: the pages never send one.
     pub fn ws_binary(&mut self, id: ClientId, len: usize, now: Now) -> Vec<Output> {
         let mut out = Vec::new();
-        if self.take_token(id, now, &mut out) {
-            self.reject(
-                id,
-                format!("binary messages ({len} bytes) are not accepted"),
-                &mut out,
-            );
-        }
+        self.connections
+            .binary(id, len, &self.params, now, &mut out);
         out
     }
 
     /// A text WebSocket message from page `id`.
     pub fn ws_text(&mut self, id: ClientId, text: &str, now: Now) -> Vec<Output> {
         let mut out = Vec::new();
-        let max = self.params.ws_max_message_bytes;
-        if !self.take_token(id, now, &mut out) {
-            // The emergency stop is never refused for rate: the therapist may be tapping it
-            // while the connection is flooded.
-            let emergency = text.len() <= max
-                && matches!(
-                    parse_client_message(text),
-                    Ok(ClientMessage::Command {
-                        command: CommandKind::EmergencyStop,
-                        ..
-                    })
-                );
-            if !emergency || !self.clients.contains_key(&id) {
-                return out;
-            }
-        }
-        if text.len() > max {
-            let reason = format!(
-                "message of {} bytes is over the limit of {max} bytes",
-                text.len()
-            );
-            self.reject(id, reason, &mut out);
-            return out;
-        }
-        match parse_client_message(text) {
-            Err(reason) => self.reject(id, reason, &mut out),
-            Ok(message) => self.handle(id, message, now, &mut out),
+        if let Some(message) = self.connections.text(id, text, &self.params, now, &mut out) {
+            self.handle(id, message, now, &mut out);
         }
         out
     }
 
-    /// Takes a rate token for `id`; when there is none, counts the drop, sends a notice at
-    /// most once a second and closes a connection that keeps flooding.
-    fn take_token(&mut self, id: ClientId, now: Now, out: &mut Vec<Output>) -> bool {
-        let (rate, burst) = (self.params.ws_messages_per_second, self.params.ws_burst);
-        let max_dropped = self.params.ws_max_dropped_before_close;
-        let Some(c) = self.clients.get_mut(&id) else {
-            return false;
-        };
-        if c.bucket.try_take(now.monotonic) {
-            c.dropped_in_a_row = 0;
-            return true;
-        }
-        c.dropped_in_a_row += 1;
-        if c.dropped_in_a_row >= max_dropped {
-            let reason = format!("closed: {max_dropped} messages in a row over the rate limit");
-            out.push(log(
-                Level::WARN,
-                format!("page {id} ({:?}): {reason}", c.role),
-            ));
-            out.push(Output::Send(
-                id,
-                ServerMessage::Rejected {
-                    reason: reason.clone(),
-                },
-            ));
-            out.push(Output::Close(id, reason));
-            self.clients.remove(&id);
-        } else if c
-            .last_notice
-            .is_none_or(|t| now.monotonic.saturating_sub(t) >= NOTICE_INTERVAL)
-        {
-            c.last_notice = Some(now.monotonic);
-            let reason = format!(
-                "too many messages: at most {rate} per second (bursts of {burst}); {} dropped",
-                c.dropped_in_a_row
-            );
-            out.push(log(
-                Level::WARN,
-                format!("page {id} ({:?}): {reason}", c.role),
-            ));
-            out.push(Output::Send(id, ServerMessage::Rejected { reason }));
-        }
-        false
-    }
-
     fn handle(&mut self, id: ClientId, message: ClientMessage, now: Now, out: &mut Vec<Output>) {
-        let Some(role) = self.clients.get(&id).map(|c| c.role) else {
+        let Some(role) = self.connections.role(id) else {
             return;
         };
         match (role, message) {
@@ -297,7 +115,7 @@ impl Bridge {
                     proposal,
                 },
             ) => {
-                let fields = crate::therapist::CommandFields {
+                let fields = CommandFields {
                     user_id,
                     cluster,
                     level,
@@ -316,62 +134,221 @@ impl Bridge {
                 } else {
                     "therapist"
                 };
-                self.reject(id, format!("the {page} page cannot send {kind}"), out);
+                let reason = format!("the {page} page cannot send {kind}");
+                self.connections.reject(id, reason, out);
             }
         }
     }
 
-    /// Refuses what page `id` sent: logged, and the reason goes back to the page.
-    pub(crate) fn reject(&self, id: ClientId, reason: String, out: &mut Vec<Output>) {
-        let role = self.clients.get(&id).map(|c| c.role);
+    /// A message from the game side.
+    pub fn dds(&mut self, input: DdsInput, now: Now) -> Vec<Output> {
+        let mut out = Vec::new();
+        match input {
+            DdsInput::GameState(g) => {
+                self.commands.follow_game(&g);
+                self.proposals.follow_game(&g, now.monotonic);
+                let closed = self.task.follow_game(&g);
+                self.game = Some(g);
+                self.gm_watch.state_arrived();
+                self.show_game(&mut out);
+                if let Some(reason) = closed {
+                    self.broadcast(Role::Child, &ServerMessage::NoTask { reason }, &mut out);
+                }
+            }
+            DdsInput::Proposal(p) => {
+                let kept = self
+                    .proposals
+                    .arrive(p, self.game.as_ref(), now.monotonic, &mut out);
+                if let Some(view) = kept {
+                    self.broadcast(Role::Therapist, &ServerMessage::Proposal(view), &mut out);
+                }
+            }
+            DdsInput::Task(t) => {
+                if let Some(view) = self.task.arrive(t, self.game.as_ref(), now, &mut out) {
+                    self.broadcast(Role::Child, &ServerMessage::Task(view), &mut out);
+                }
+            }
+            DdsInput::Decision(d) => {
+                let view = self.history.decision(&d);
+                self.broadcast(Role::Therapist, &ServerMessage::Decision(view), &mut out);
+            }
+            DdsInput::Result(r) => {
+                let view = self.history.result(r);
+                self.broadcast(Role::Therapist, &ServerMessage::Result(view), &mut out);
+            }
+            DdsInput::Heartbeat(hb) => {
+                if self.gm_watch.heartbeat(&hb, now.monotonic, &mut out) {
+                    self.show_game(&mut out);
+                }
+                if self.gm_watch.follow_twins(now.monotonic) {
+                    self.show_game(&mut out);
+                }
+            }
+            DdsInput::Engagement(e) => {
+                let limit = self.params.engagement_history;
+                let point = self.history.engagement(&e, limit);
+                self.broadcast(Role::Therapist, &ServerMessage::Engagement(point), &mut out);
+            }
+        }
+        out
+    }
+
+    /// When [`Bridge::tick`] must next be called (monotonic), if at all.
+    pub fn next_deadline(&self) -> Option<Duration> {
+        self.gm_watch.next_deadline()
+    }
+
+    /// The clock reached a deadline of [`Bridge::next_deadline`].
+    pub fn tick(&mut self, now: Now) -> Vec<Output> {
+        let mut out = Vec::new();
+        if self.gm_watch.tick(now.monotonic, &mut out) {
+            self.show_game(&mut out);
+        }
+        out
+    }
+
+    /// A child page's answer: published when it counts, refused with the reason otherwise.
+    fn answer(
+        &mut self,
+        id: ClientId,
+        sequence_id: u32,
+        answer: Vec<String>,
+        response_time: f64,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        let lost = self.gm_watch.lost();
+        let game = self.game.as_ref();
+        let message = match self
+            .task
+            .answer(sequence_id, &answer, response_time, game, lost, now)
+        {
+            Ok(message) => message,
+            Err(reason) => {
+                self.connections.reject(id, reason, out);
+                return;
+            }
+        };
         out.push(log(
-            Level::WARN,
-            format!("page {id} ({role:?}) rejected: {reason}"),
+            Level::INFO,
+            format!(
+                "page {id}: answer to sequence {sequence_id} of session {:?} sent: {:?}",
+                message.session_id, message.answer
+            ),
         ));
-        out.push(Output::Send(id, ServerMessage::Rejected { reason }));
+        out.push(Output::Send(
+            id,
+            ServerMessage::Accepted {
+                what: "answer".into(),
+            },
+        ));
+        // Another child page showing the same task now has nothing to answer.
+        let done = ServerMessage::NoTask {
+            reason: "answered".into(),
+        };
+        self.connections.send_to(Role::Child, Some(id), &done, out);
+        out.push(Output::Answer(message));
+    }
+
+    /// A therapist page's login with the PIN: once in, it gets what a therapist page shows.
+    fn login(&mut self, id: ClientId, pin: &str, now: Now, out: &mut Vec<Output>) {
+        if self.connections.log_in(id, pin, &self.params, now, out) {
+            self.therapist_snapshot(id, now, out);
+        }
+    }
+
+    /// A therapist page's command: published when the page is logged in, the PIN is right
+    /// and the command fits (`therapist`, and `proposal` for an answer to a proposal).
+    fn command(
+        &mut self,
+        id: ClientId,
+        pin: &str,
+        kind: CommandKind,
+        fields: CommandFields,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        if !self
+            .connections
+            .may_command(id, pin, &self.params, now, out)
+        {
+            return;
+        }
+        let made = self
+            .commands
+            .session_for(kind, &fields, self.game.as_ref(), now)
+            .and_then(|session| {
+                self.proposals
+                    .check_answer(kind, fields.proposal, &session)
+                    .map(|()| session)
+            })
+            .and_then(|session| self.commands.make(kind, session, fields, now));
+        let command = match made {
+            Ok(Made::Command(command)) => command,
+            Ok(Made::EmergencyStopRepeated) => {
+                let what = "emergency stop (already sent)".to_string();
+                out.push(Output::Send(id, ServerMessage::Accepted { what }));
+                return;
+            }
+            Err(reason) => {
+                self.connections.reject(id, reason, out);
+                return;
+            }
+        };
+        let session = &command.session_id;
+        out.push(log(
+            Level::INFO,
+            format!(
+                "page {id}: command {} ({kind:?}) sent for session {session:?}",
+                command.command_id
+            ),
+        ));
+        let sent = ServerMessage::CommandSent {
+            command: kind,
+            session_id: session.clone(),
+            command_id: command.command_id,
+        };
+        self.broadcast(Role::Therapist, &sent, out);
+        out.push(Output::Command(command));
     }
 
     /// Sends `message` to every child page, or every logged-in therapist page.
-    pub(crate) fn broadcast(&self, role: Role, message: &ServerMessage, out: &mut Vec<Output>) {
-        for (id, c) in &self.clients {
-            if c.role == role && (role == Role::Child || c.logged_in) {
-                out.push(Output::Send(*id, message.clone()));
-            }
-        }
+    fn broadcast(&self, role: Role, message: &ServerMessage, out: &mut Vec<Output>) {
+        self.connections.broadcast(role, message, out);
     }
 
     /// Everything a therapist page shows, for one that just logged in.
-    pub(crate) fn therapist_snapshot(&self, id: ClientId, now: Now, out: &mut Vec<Output>) {
+    fn therapist_snapshot(&self, id: ClientId, now: Now, out: &mut Vec<Output>) {
         out.push(Output::Send(id, ServerMessage::LoggedIn));
-        if let Some(v) = self.therapist_view() {
+        if let Some(v) = self.gm_watch.therapist_view(self.game.as_ref()) {
             out.push(Output::Send(id, ServerMessage::Game(v)));
         }
-        let points = self.engagement.iter().cloned().collect();
+        let points = self.history.engagement.iter().cloned().collect();
         out.push(Output::Send(
             id,
             ServerMessage::EngagementHistory { points },
         ));
-        for d in &self.decisions {
+        for d in &self.history.decisions {
             out.push(Output::Send(id, ServerMessage::Decision(d.clone())));
         }
-        for r in &self.results {
+        for r in &self.history.results {
             out.push(Output::Send(id, ServerMessage::Result(r.clone())));
         }
         // Only a proposal still waiting for an answer: a settled one is history.
-        if let Some(p) = self.open_proposal_view(now) {
+        let open = self.proposals.open_view(self.game.as_ref(), now.monotonic);
+        if let Some(p) = open {
             out.push(Output::Send(id, ServerMessage::Proposal(p)));
         }
     }
 
-    pub(crate) fn child_task_message(&self) -> ServerMessage {
-        match &self.task {
-            Some(t) if !t.answered => ServerMessage::Task(TaskView::of(&t.task)),
-            Some(_) => ServerMessage::NoTask {
-                reason: "answered".into(),
-            },
-            None => ServerMessage::NoTask {
-                reason: "waiting".into(),
-            },
+    /// Sends both pages the game as it now stands.
+    fn show_game(&self, out: &mut Vec<Output>) {
+        let game = self.game.as_ref();
+        if let Some(v) = self.gm_watch.therapist_view(game) {
+            self.broadcast(Role::Therapist, &ServerMessage::Game(v), out);
+        }
+        if let Some(v) = self.gm_watch.child_view(game) {
+            self.broadcast(Role::Child, &ServerMessage::Game(v), out);
         }
     }
 }

@@ -1,12 +1,14 @@
-//! The child page's side of the core: an answer becomes a `TabletAnswer` only when it is for
-//! the task on screen, is its first answer, came in time, and holds exactly the number of
-//! emotions asked, each one offered by the task.
+//! The child page's side of the core: the task on its screen, open from the game manager's
+//! `TabletTask` until it is answered, replaced, or the game moves to a phase where no answer
+//! can count; and its answer, which becomes a `TabletAnswer` only when it is for the task on
+//! screen, is its first answer, came in time, and holds exactly the number of emotions asked,
+//! each one offered by the task.
 
-use crate::bridge::{Bridge, ClientId, Now, Output, log};
-use crate::protocol::{Role, ServerMessage};
+use crate::io::{Now, Output, log};
+use crate::protocol::{ServerMessage, TaskView};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{GameState, TabletAnswer, Validate};
+use qt_therapy_msgs::{GamePhase, GameState, TabletAnswer, TabletTask, Validate};
 use sequence_game::parse_answer;
 use std::time::Duration;
 use tracing::Level;
@@ -14,57 +16,113 @@ use tracing::Level;
 /// Network and rendering slack past the task's timeout before an answer counts as late.
 pub const ANSWER_GRACE: Duration = Duration::from_secs(2);
 
-impl Bridge {
-    pub(crate) fn answer(
-        &mut self,
-        id: ClientId,
-        sequence_id: u32,
-        answer: Vec<String>,
-        response_time: f64,
-        now: Now,
-        out: &mut Vec<Output>,
-    ) {
-        match self.check_answer(sequence_id, &answer, response_time, now) {
-            Err(reason) => self.reject(id, reason, out),
-            Ok(message) => {
-                if let Some(t) = self.task.as_mut() {
-                    t.answered = true;
-                }
-                out.push(log(
-                    Level::INFO,
-                    format!(
-                        "page {id}: answer to sequence {sequence_id} of session {:?} sent: {:?}",
-                        message.session_id, message.answer
-                    ),
-                ));
-                out.push(Output::Send(
-                    id,
-                    ServerMessage::Accepted {
-                        what: "answer".into(),
-                    },
-                ));
-                // Another child page showing the same task now has nothing to answer.
-                let done = ServerMessage::NoTask {
-                    reason: "answered".into(),
-                };
-                for (other, c) in &self.clients {
-                    if c.role == Role::Child && *other != id {
-                        out.push(Output::Send(*other, done.clone()));
-                    }
-                }
-                out.push(Output::Answer(message));
-            }
+/// The task on the child's screen.
+#[derive(Debug)]
+struct OpenTask {
+    task: TabletTask,
+    received: Duration,
+    answered: bool,
+}
+
+/// The child tablet's task: the one open, and the newest seen.
+#[derive(Debug, Default)]
+pub(crate) struct ChildTask {
+    open: Option<OpenTask>,
+    /// (session, sequence_id) of the newest task seen, so re-delivered tasks stay closed.
+    last: Option<(String, u32)>,
+}
+
+impl ChildTask {
+    /// What a child page is told about the task now.
+    pub(crate) fn message(&self) -> ServerMessage {
+        match &self.open {
+            Some(t) if !t.answered => ServerMessage::Task(TaskView::of(&t.task)),
+            Some(_) => ServerMessage::NoTask {
+                reason: "answered".into(),
+            },
+            None => ServerMessage::NoTask {
+                reason: "waiting".into(),
+            },
         }
     }
 
-    fn check_answer(
-        &self,
+    /// A task from the game manager, with the game's state as last heard (`game`): what the
+    /// child pages are to show when it opens.
+    pub(crate) fn arrive(
+        &mut self,
+        t: TabletTask,
+        game: Option<&GameState>,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> Option<TaskView> {
+        if let Some((session, last)) = &self.last {
+            // Transient-local topics re-deliver the last task; older ones are stale.
+            if *session == t.session_id && t.sequence_id <= *last {
+                out.push(log(
+                    Level::DEBUG,
+                    format!("task {} already seen; ignored", t.sequence_id),
+                ));
+                return None;
+            }
+        }
+        if let Some(g) = game {
+            let over = GameState::is_ended(g.phase);
+            if over && g.session_id == t.session_id {
+                out.push(log(
+                    Level::INFO,
+                    format!("task for the ended session {:?}; ignored", t.session_id),
+                ));
+                return None;
+            }
+        }
+        out.push(log(
+            Level::INFO,
+            format!(
+                "new task {} of session {:?}, {} emotions",
+                t.sequence_id, t.session_id, t.length
+            ),
+        ));
+        self.last = Some((t.session_id.clone(), t.sequence_id));
+        let view = TaskView::of(&t);
+        self.open = Some(OpenTask {
+            task: t,
+            received: now.monotonic,
+            answered: false,
+        });
+        Some(view)
+    }
+
+    /// The game's new state `g`: an open task closes when the game has ended or plays
+    /// another session (the reason the child pages are given).
+    pub(crate) fn follow_game(&mut self, g: &GameState) -> Option<String> {
+        let ended = matches!(
+            GamePhase::try_from(g.phase),
+            Ok(GamePhase::Idle
+                | GamePhase::Finished
+                | GamePhase::Stopped
+                | GamePhase::EmergencyStopped)
+        );
+        let open = self.open.as_ref()?;
+        if !ended && open.task.session_id == g.session_id {
+            return None;
+        }
+        self.open = None;
+        Some(format!("the game is {}", GameState::phase_name(g.phase)))
+    }
+
+    /// The answer a child page sent, as the `TabletAnswer` to publish (the task is then
+    /// answered), or why it cannot count: `game` is the game's state as last heard, and
+    /// `game_manager_lost` whether its heartbeat has stopped.
+    pub(crate) fn answer(
+        &mut self,
         sequence_id: u32,
         answer: &[String],
         response_time: f64,
+        game: Option<&GameState>,
+        game_manager_lost: bool,
         now: Now,
     ) -> Result<TabletAnswer, String> {
-        let Some(open) = &self.task else {
+        let Some(open) = self.open.as_mut() else {
             return Err("no task is waiting for an answer".into());
         };
         let task = &open.task;
@@ -77,10 +135,10 @@ impl Bridge {
         if open.answered {
             return Err(format!("sequence {sequence_id} was already answered"));
         }
-        if self.gm_watch.lost() {
+        if game_manager_lost {
             return Err("the game manager is lost: the answer could not be scored".into());
         }
-        if let Some(g) = &self.game
+        if let Some(g) = game
             && g.phase == GameState::PAUSED
             && g.session_id == task.session_id
         {
@@ -118,6 +176,7 @@ impl Bridge {
             response_time: response_time as f32,
         };
         message.validate().map_err(|e| e.reason)?;
+        open.answered = true;
         Ok(message)
     }
 }

@@ -8,7 +8,9 @@
 pub mod bridge;
 pub mod certificates;
 mod child;
+mod connections;
 mod game;
+pub mod io;
 pub mod limits;
 pub mod node;
 pub mod pages;
@@ -20,6 +22,7 @@ pub mod therapist;
 pub mod tls;
 pub mod watch;
 
-pub use bridge::{Bridge, ClientId, DdsInput, Now, Output};
+pub use bridge::Bridge;
+pub use io::{ClientId, DdsInput, Now, Output};
 pub use params::TabletBridgeParams;
 pub use protocol::{ClientMessage, CommandKind, Role, ServerMessage};

@@ -4,7 +4,8 @@
 //! [`PageEvent`]s. Over DDS the HTTPS + WebSocket server (`server`) makes those events from
 //! the tablets; in process a test sends them itself, as a tablet's page would.
 
-use crate::bridge::{Bridge, ClientId, DdsInput, Now, Output};
+use crate::bridge::Bridge;
+use crate::io::{ClientId, DdsInput, Now, Output};
 use crate::params::TabletBridgeParams;
 use crate::protocol::Role;
 use crate::server::{OUTGOING_QUEUE, Publish};

@@ -3,19 +3,19 @@
 //! child's), with the seconds left counted on the bridge's own clock from the proposal's
 //! arrival; commands that answer a proposal are refused once it is no longer open.
 
-use crate::bridge::{Bridge, Now, Output, log};
-use crate::protocol::{CommandKind, ProposalView, Role, ServerMessage};
+use crate::io::{Output, log};
+use crate::protocol::{CommandKind, ProposalView, proposal_choices};
 use qt_therapy_msgs::topics::ACTION_PROPOSAL;
 use qt_therapy_msgs::{ActionProposal, GameState};
-use session_log::Arrival;
+use session_log::{Arrival, Once};
 use session_tally::live_line::proposal_status_name;
 use std::time::Duration;
 use tracing::Level;
 
 /// The newest proposal of the game's session and when the bridge got it.
 #[derive(Debug, Clone)]
-pub(crate) struct KeptProposal {
-    pub(crate) proposal: ActionProposal,
+struct KeptProposal {
+    proposal: ActionProposal,
     /// Arrival on the bridge's monotonic clock (moved on by a pause, while the countdown waits).
     received: Duration,
     /// The game paused during the countdown: the game manager's countdown waits, and so does
@@ -24,12 +24,12 @@ pub(crate) struct KeptProposal {
 }
 
 impl KeptProposal {
-    pub(crate) fn is_open(&self) -> bool {
+    fn is_open(&self) -> bool {
         self.proposal.status == ActionProposal::PROPOSED
     }
 
     /// Seconds of its countdown left at `now` (negative once it ran out).
-    pub(crate) fn remaining(&self, now: Duration) -> f64 {
+    fn remaining(&self, now: Duration) -> f64 {
         let until = self.paused_at.unwrap_or(now);
         f64::from(self.proposal.countdown) - until.saturating_sub(self.received).as_secs_f64()
     }
@@ -44,10 +44,26 @@ fn older(a: &ActionProposal, b: &GameState) -> bool {
     a.header.stamp.to_nanos() < b.header.stamp.to_nanos()
 }
 
-impl Bridge {
-    /// A proposal from the game manager: kept, and sent to the therapist pages.
-    pub(crate) fn proposal(&mut self, p: ActionProposal, now: Now, out: &mut Vec<Output>) {
-        match self.proposals_taken.arrive(&p, ACTION_PROPOSAL.name) {
+/// The proposals the bridge has taken: the newest of the game's session, kept.
+#[derive(Debug, Default)]
+pub(crate) struct Proposals {
+    kept: Option<KeptProposal>,
+    /// Every proposal message taken, by the suite's rule for what arrives twice
+    /// (`session_log`): one delivered again must not start its countdown again.
+    taken: Once<ActionProposal>,
+}
+
+impl Proposals {
+    /// A proposal from the game manager, with the game's state as last heard (`game`): its
+    /// view for the therapist pages when it is kept.
+    pub(crate) fn arrive(
+        &mut self,
+        p: ActionProposal,
+        game: Option<&GameState>,
+        now: Duration,
+        out: &mut Vec<Output>,
+    ) -> Option<ProposalView> {
+        match self.taken.arrive(&p, ACTION_PROPOSAL.name) {
             Ok(Arrival::New) => {}
             Ok(Arrival::Repeat) => {
                 out.push(log(
@@ -57,17 +73,17 @@ impl Bridge {
                         p.proposal_id, p.step
                     ),
                 ));
-                return;
+                return None;
             }
             Err(conflict) => {
                 out.push(log(Level::WARN, format!("{conflict}; the first is kept")));
-                return;
+                return None;
             }
         }
         // The topic keeps its history: a bridge (re)started mid-session gets the proposals of
         // earlier sessions too, after or before the game's state. Those older than the state
         // of another session are history; a newer one opens the next session.
-        if let Some(g) = &self.game
+        if let Some(g) = game
             && g.session_id != p.session_id
             && older(&p, g)
         {
@@ -78,9 +94,9 @@ impl Bridge {
                     p.step, p.session_id
                 ),
             ));
-            return;
+            return None;
         }
-        if let Some(k) = &self.proposal
+        if let Some(k) = &self.kept
             && k.proposal.session_id == p.session_id
             && p.header.stamp.to_nanos() < k.proposal.header.stamp.to_nanos()
         {
@@ -88,15 +104,13 @@ impl Bridge {
                 Level::DEBUG,
                 format!("an older proposal for sequence {}; ignored", p.step),
             ));
-            return;
+            return None;
         }
-        let paused = self
-            .game
-            .as_ref()
-            .is_some_and(|g| g.session_id == p.session_id && g.phase == GameState::PAUSED);
+        let paused =
+            game.is_some_and(|g| g.session_id == p.session_id && g.phase == GameState::PAUSED);
         let kept = KeptProposal {
-            received: now.monotonic,
-            paused_at: (paused && p.status == ActionProposal::PROPOSED).then_some(now.monotonic),
+            received: now,
+            paused_at: (paused && p.status == ActionProposal::PROPOSED).then_some(now),
             proposal: p,
         };
         let p = &kept.proposal;
@@ -111,15 +125,15 @@ impl Bridge {
                 p.countdown
             ),
         ));
-        let view = kept.view(now.monotonic);
-        self.proposal = Some(kept);
-        self.broadcast(Role::Therapist, &ServerMessage::Proposal(view), out);
+        let view = kept.view(now);
+        self.kept = Some(kept);
+        Some(view)
     }
 
     /// The game's state moved on: a proposal of another session is dropped, and a pause
     /// stops the countdown until the game goes on.
-    pub(crate) fn proposal_follows_game(&mut self, g: &GameState, now: Now) {
-        let Some(k) = self.proposal.as_mut() else {
+    pub(crate) fn follow_game(&mut self, g: &GameState, now: Duration) {
+        let Some(k) = self.kept.as_mut() else {
             return;
         };
         if k.proposal.session_id != g.session_id {
@@ -127,38 +141,43 @@ impl Bridge {
                 // A new session's first proposal before its first state: keep it.
                 return;
             }
-            self.proposal = None;
+            self.kept = None;
             return;
         }
         if !k.is_open() {
             return;
         }
         match (g.phase == GameState::PAUSED, k.paused_at) {
-            (true, None) => k.paused_at = Some(now.monotonic),
+            (true, None) => k.paused_at = Some(now),
             (false, Some(at)) => {
-                k.received += now.monotonic.saturating_sub(at);
+                k.received += now.saturating_sub(at);
                 k.paused_at = None;
             }
             _ => {}
         }
     }
 
-    /// The open proposal of the game's session as a page sees it now, if there is one.
-    pub(crate) fn open_proposal_view(&self, now: Now) -> Option<ProposalView> {
-        let k = self.proposal.as_ref().filter(|k| k.is_open())?;
-        if let Some(g) = &self.game
+    /// The open proposal of the game's session (`game`) as a page sees it now, if there is
+    /// one.
+    pub(crate) fn open_view(
+        &self,
+        game: Option<&GameState>,
+        now: Duration,
+    ) -> Option<ProposalView> {
+        let k = self.kept.as_ref().filter(|k| k.is_open())?;
+        if let Some(g) = game
             && (g.session_id != k.proposal.session_id
                 || GameState::is_ended(g.phase)
                 || g.phase == GameState::IDLE)
         {
             return None;
         }
-        Some(k.view(now.monotonic))
+        Some(k.view(now))
     }
 
     /// Whether `kind`, for `session`, may go out as an answer to the proposal of step
     /// `answering` (the proposal card names it; plain overrides name none).
-    pub(crate) fn check_proposal_answer(
+    pub(crate) fn check_answer(
         &self,
         kind: CommandKind,
         answering: Option<u8>,
@@ -168,7 +187,7 @@ impl Bridge {
             return Ok(());
         }
         let Some(k) = self
-            .proposal
+            .kept
             .as_ref()
             .filter(|k| k.proposal.session_id == session)
         else {
@@ -196,7 +215,7 @@ impl Bridge {
             CommandKind::OverrideChallenging => "challenge",
             _ => return Ok(()),
         };
-        if crate::protocol::proposal_choices(p).contains(&feedback) {
+        if proposal_choices(p).contains(&feedback) {
             Ok(())
         } else {
             Err(format!(

@@ -5,7 +5,7 @@
 //! here. [`serve_on`] runs the pages with the core's loop on channels instead of a bus (the
 //! HTTP tests).
 
-use crate::bridge::DdsInput;
+use crate::io::DdsInput;
 use crate::node::{EVENT_QUEUE, PageEvent, ToPage, run_core};
 use crate::pages::Pages;
 use crate::params::TabletBridgeParams;

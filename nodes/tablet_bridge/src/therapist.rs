@@ -1,15 +1,15 @@
-//! The therapist page's side of the core: PIN login, and commands turned into
-//! `TherapistCommand`s with the session they are for and a command id that only increases.
+//! The therapist page's commands, turned into `TherapistCommand`s: the fields each command
+//! takes, the session it is for (a start opens a new one) and a command id that only
+//! increases. A logged-in page and its PIN are checked before (`bridge`), an answer to a
+//! proposal by the proposal kept (`proposal`).
 
-use crate::bridge::{Bridge, ClientId, Now, Output, log};
-use crate::limits::pin_matches;
-use crate::protocol::{CommandKind, Role, ServerMessage};
+use crate::io::Now;
+use crate::protocol::CommandKind;
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{GamePhase, GameState, TherapistCommand, Validate};
 use std::collections::VecDeque;
 use std::time::Duration;
-use tracing::Level;
 
 /// Sessions whose last command id is remembered.
 const SESSIONS_REMEMBERED: usize = 16;
@@ -48,127 +48,45 @@ pub struct CommandFields {
     pub proposal: Option<u8>,
 }
 
-impl Bridge {
-    pub(crate) fn login(&mut self, id: ClientId, pin: &str, now: Now, out: &mut Vec<Output>) {
-        if self.clients.get(&id).is_some_and(|c| c.logged_in) {
-            self.therapist_snapshot(id, now, out);
-            return;
-        }
-        if !self.pin_budget.has_token(now.monotonic) {
-            let wait = self.pin_budget.wait_secs(now.monotonic).ceil();
-            let reason = format!("too many wrong PINs: try again in {wait} s");
-            self.reject(id, reason, out);
-            return;
-        }
-        if !pin_matches(pin, &self.params.pin) {
-            self.wrong_pin(id, now, out);
-            return;
-        }
-        if let Some(c) = self.clients.get_mut(&id) {
-            c.logged_in = true;
-            c.pin_failures = 0;
-        }
-        out.push(log(Level::INFO, format!("page {id}: therapist logged in")));
-        self.therapist_snapshot(id, now, out);
-    }
+/// What a command the checks let through becomes.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Made {
+    /// The command to publish.
+    Command(TherapistCommand),
+    /// An emergency stop for the session repeated within [`EMERGENCY_REPEAT`]: acknowledged,
+    /// not published again.
+    EmergencyStopRepeated,
+}
 
-    fn wrong_pin(&mut self, id: ClientId, now: Now, out: &mut Vec<Output>) {
-        self.pin_budget.try_take(now.monotonic);
-        let max = self.params.pin_max_failures;
-        let Some(c) = self.clients.get_mut(&id) else {
-            return;
-        };
-        c.pin_failures += 1;
-        let failures = c.pin_failures;
-        self.reject(id, "wrong PIN".into(), out);
-        if failures >= max {
-            let reason = format!("closed after {failures} wrong PINs");
-            out.push(log(Level::WARN, format!("page {id}: {reason}")));
-            out.push(Output::Close(id, reason));
-            self.clients.remove(&id);
+/// The commands' memory: the session they go to, the ids given, the last emergency stop.
+#[derive(Debug, Default)]
+pub(crate) struct Commands {
+    ids: CommandIds,
+    /// The session commands go to: the game's, or the one this bridge just started.
+    current_session: Option<String>,
+    last_emergency_stop: Option<(String, Duration)>,
+}
+
+impl Commands {
+    /// The game's new state: commands go to its session from now on.
+    pub(crate) fn follow_game(&mut self, g: &GameState) {
+        if !g.session_id.is_empty() {
+            self.current_session = Some(g.session_id.clone());
         }
     }
 
-    pub(crate) fn command(
-        &mut self,
-        id: ClientId,
-        pin: &str,
+    /// The session command `kind` with `fields` goes to, with the game's state as last heard
+    /// (`game`); or why it cannot go out.
+    pub(crate) fn session_for(
+        &self,
         kind: CommandKind,
-        fields: CommandFields,
+        fields: &CommandFields,
+        game: Option<&GameState>,
         now: Now,
-        out: &mut Vec<Output>,
-    ) {
-        if !self.clients.get(&id).is_some_and(|c| c.logged_in) {
-            self.reject(id, "log in with the PIN first".into(), out);
-            return;
-        }
-        if !pin_matches(pin, &self.params.pin) {
-            self.wrong_pin(id, now, out);
-            return;
-        }
-        if let Err(reason) = check_fields(kind, &fields) {
-            self.reject(id, reason, out);
-            return;
-        }
-        let session = match self.session_for(kind, now) {
-            Ok(s) => s,
-            Err(reason) => {
-                self.reject(id, reason, out);
-                return;
-            }
-        };
-        if let Err(reason) = self.check_proposal_answer(kind, fields.proposal, &session) {
-            self.reject(id, reason, out);
-            return;
-        }
-        if kind == CommandKind::EmergencyStop
-            && let Some((s, at)) = &self.last_emergency_stop
-            && *s == session
-            && now.monotonic.saturating_sub(*at) < EMERGENCY_REPEAT
-        {
-            let what = "emergency stop (already sent)".to_string();
-            out.push(Output::Send(id, ServerMessage::Accepted { what }));
-            return;
-        }
-        let command = TherapistCommand {
-            header: Header::at(Time::from_nanos(now.wall_nanos)),
-            command: kind.code(),
-            session_id: session.clone(),
-            command_id: self.command_ids.next(&session, now.wall_nanos),
-            user_id: fields.user_id.unwrap_or_default(),
-            user_model_cluster: fields.cluster.unwrap_or(-1),
-            level: fields.level.unwrap_or(0),
-        };
-        if let Err(e) = command.validate() {
-            self.reject(id, e.reason, out);
-            return;
-        }
-        if kind == CommandKind::EmergencyStop {
-            self.last_emergency_stop = Some((session.clone(), now.monotonic));
-        }
-        if kind == CommandKind::Start {
-            self.current_session = Some(session.clone());
-        }
-        out.push(log(
-            Level::INFO,
-            format!(
-                "page {id}: command {} ({kind:?}) sent for session {session:?}",
-                command.command_id
-            ),
-        ));
-        let sent = ServerMessage::CommandSent {
-            command: kind,
-            session_id: session,
-            command_id: command.command_id,
-        };
-        self.broadcast(Role::Therapist, &sent, out);
-        out.push(Output::Command(command));
-    }
-
-    /// The session a command goes to; START opens a new one.
-    fn session_for(&self, kind: CommandKind, now: Now) -> Result<String, String> {
+    ) -> Result<String, String> {
+        check_fields(kind, fields)?;
         // A session under way, paused or not.
-        let running = self.game.as_ref().filter(|g| {
+        let running = game.filter(|g| {
             GamePhase::try_from(g.phase).is_ok_and(|p| p.is_running() || p == GamePhase::Paused)
         });
         match kind {
@@ -197,6 +115,41 @@ impl Bridge {
                 .clone()
                 .ok_or_else(|| "no session is known yet: start one first".to_string()),
         }
+    }
+
+    /// Command `kind` with `fields` for `session` (checked by [`Self::session_for`]), with
+    /// its id; or why it is not valid.
+    pub(crate) fn make(
+        &mut self,
+        kind: CommandKind,
+        session: String,
+        fields: CommandFields,
+        now: Now,
+    ) -> Result<Made, String> {
+        if kind == CommandKind::EmergencyStop
+            && let Some((s, at)) = &self.last_emergency_stop
+            && *s == session
+            && now.monotonic.saturating_sub(*at) < EMERGENCY_REPEAT
+        {
+            return Ok(Made::EmergencyStopRepeated);
+        }
+        let command = TherapistCommand {
+            header: Header::at(Time::from_nanos(now.wall_nanos)),
+            command: kind.code(),
+            command_id: self.ids.next(&session, now.wall_nanos),
+            session_id: session,
+            user_id: fields.user_id.unwrap_or_default(),
+            user_model_cluster: fields.cluster.unwrap_or(-1),
+            level: fields.level.unwrap_or(0),
+        };
+        command.validate().map_err(|e| e.reason)?;
+        if kind == CommandKind::EmergencyStop {
+            self.last_emergency_stop = Some((command.session_id.clone(), now.monotonic));
+        }
+        if kind == CommandKind::Start {
+            self.current_session = Some(command.session_id.clone());
+        }
+        Ok(Made::Command(command))
     }
 }
 

@@ -7,8 +7,8 @@
 //! a bridge that never hears one (a replay) shows nothing. Two game managers beating (one
 //! started twice) stay on the therapist page's status until one of them stops.
 
-use crate::bridge::{Bridge, Now, Output, log};
-use crate::protocol::{GameView, Role, ServerMessage};
+use crate::io::{Output, log};
+use crate::protocol::GameView;
 use heartbeat_watch::{Heard, HeartbeatWatch, Twins};
 use qt_therapy_msgs::{GameState, Heartbeat};
 use std::time::Duration;
@@ -22,9 +22,18 @@ pub const GAME_MANAGER_NODE: &str = "game_manager";
 pub(crate) struct GameManagerWatch {
     heartbeats: HeartbeatWatch,
     /// What the therapist page's status starts with while lost, or just after it came back.
-    pub(crate) notice: Option<String>,
+    notice: Option<String>,
     /// Two game manager processes beating, as last shown.
     twins: Vec<Twins>,
+}
+
+/// The bridge's monotonic clock in the watch's nanoseconds.
+fn nanos(t: Duration) -> i64 {
+    i64::try_from(t.as_nanos()).unwrap_or(i64::MAX)
+}
+
+fn seconds(ns: i64) -> f64 {
+    ns as f64 * 1e-9
 }
 
 impl GameManagerWatch {
@@ -40,30 +49,18 @@ impl GameManagerWatch {
     pub(crate) fn lost(&self) -> bool {
         self.heartbeats.is_lost(GAME_MANAGER_NODE)
     }
-}
 
-/// The bridge's monotonic clock in the watch's nanoseconds.
-fn nanos(t: Duration) -> i64 {
-    i64::try_from(t.as_nanos()).unwrap_or(i64::MAX)
-}
-
-fn seconds(ns: i64) -> f64 {
-    ns as f64 * 1e-9
-}
-
-impl Bridge {
-    /// When [`Bridge::tick`] must next be called (monotonic), if at all.
-    pub fn next_deadline(&self) -> Option<Duration> {
-        let ns = self.gm_watch.heartbeats.next_deadline_ns()?;
+    /// When [`Self::tick`] must next be called (monotonic), if at all.
+    pub(crate) fn next_deadline(&self) -> Option<Duration> {
+        let ns = self.heartbeats.next_deadline_ns()?;
         Some(Duration::from_nanos(u64::try_from(ns).unwrap_or(0)))
     }
 
-    /// The clock reached a deadline of [`Bridge::next_deadline`].
-    pub fn tick(&mut self, now: Now) -> Vec<Output> {
-        let mut out = Vec::new();
-        let w = &mut self.gm_watch;
-        let Some(lost) = w.heartbeats.check(nanos(now.monotonic)).pop() else {
-            return out;
+    /// The clock reached a deadline of [`Self::next_deadline`]: true when the game manager
+    /// is lost now (the pages must be shown the game again).
+    pub(crate) fn tick(&mut self, now: Duration, out: &mut Vec<Output>) -> bool {
+        let Some(lost) = self.heartbeats.check(nanos(now)).pop() else {
+            return false;
         };
         let notice = format!(
             "game manager lost: no heartbeat for {:.1} s (last pid {}); the robot gets no \
@@ -72,19 +69,21 @@ impl Bridge {
             lost.last_pid.unwrap_or(0)
         );
         out.push(log(Level::WARN, notice.clone()));
-        w.notice = Some(notice);
-        w.twins = w.heartbeats.twins(nanos(now.monotonic));
-        self.show_game(&mut out);
-        out
+        self.notice = Some(notice);
+        self.twins = self.heartbeats.twins(nanos(now));
+        true
     }
 
-    pub(crate) fn heartbeat(&mut self, hb: &Heartbeat, now: Now, out: &mut Vec<Output>) {
-        let w = &mut self.gm_watch;
-        match w
-            .heartbeats
-            .heartbeat(&hb.node_name, hb.pid, nanos(now.monotonic))
-        {
-            Heard::Unwatched | Heard::WatchStarted | Heard::Alive => {}
+    /// Any node's heartbeat: true when it is the lost game manager's, back (the pages must
+    /// be shown the game again). [`Self::follow_twins`] comes after it.
+    pub(crate) fn heartbeat(
+        &mut self,
+        hb: &Heartbeat,
+        now: Duration,
+        out: &mut Vec<Output>,
+    ) -> bool {
+        match self.heartbeats.heartbeat(&hb.node_name, hb.pid, nanos(now)) {
+            Heard::Unwatched | Heard::WatchStarted | Heard::Alive => false,
             Heard::Back { silent_ns, .. } => {
                 let back = format!(
                     "game manager back (pid {}) after {:.1} s without a heartbeat",
@@ -92,38 +91,57 @@ impl Bridge {
                     seconds(silent_ns)
                 );
                 out.push(log(Level::INFO, back.clone()));
-                w.notice = Some(back);
-                self.show_game(out);
+                self.notice = Some(back);
+                true
             }
-            Heard::Restarted { old_pid } => out.push(log(
-                Level::WARN,
-                format!(
-                    "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
-                    hb.pid
-                ),
-            )),
-            Heard::Twice { other_pid } => out.push(log(
-                Level::WARN,
-                format!(
-                    "two game managers beat (pids {other_pid} and {}): one was started twice; \
-                     stop one",
-                    hb.pid
-                ),
-            )),
-        }
-        let w = &mut self.gm_watch;
-        let twins = w.heartbeats.twins(nanos(now.monotonic));
-        if twins != w.twins {
-            w.twins = twins;
-            self.show_game(out);
+            Heard::Restarted { old_pid } => {
+                out.push(log(
+                    Level::WARN,
+                    format!(
+                        "game manager restarted (pid {old_pid} -> {}) within the loss timeout",
+                        hb.pid
+                    ),
+                ));
+                false
+            }
+            Heard::Twice { other_pid } => {
+                out.push(log(
+                    Level::WARN,
+                    format!(
+                        "two game managers beat (pids {other_pid} and {}): one was started \
+                         twice; stop one",
+                        hb.pid
+                    ),
+                ));
+                false
+            }
         }
     }
 
-    /// The game view for the therapist page: the game manager's own, its status prefixed by
-    /// the loss (or the return) while there is one to tell.
-    pub(crate) fn therapist_view(&self) -> Option<GameView> {
-        let notice = self.gm_watch.notice.as_ref();
-        let g = match (&self.game, notice) {
+    /// Follows the pairs of game managers beating: true when that changed (the pages must be
+    /// shown the game again).
+    pub(crate) fn follow_twins(&mut self, now: Duration) -> bool {
+        let twins = self.heartbeats.twins(nanos(now));
+        if twins == self.twins {
+            return false;
+        }
+        self.twins = twins;
+        true
+    }
+
+    /// The game manager's own state arrived: once it is not lost, that state says what it
+    /// does now, and the notice of its return goes.
+    pub(crate) fn state_arrived(&mut self) {
+        if !self.lost() {
+            self.notice = None;
+        }
+    }
+
+    /// The game view for the therapist page: the game manager's own (`game`), its status
+    /// prefixed by the loss (or the return) while there is one to tell.
+    pub(crate) fn therapist_view(&self, game: Option<&GameState>) -> Option<GameView> {
+        let notice = self.notice.as_ref();
+        let g = match (game, notice) {
             (Some(g), _) => g.clone(),
             (None, Some(_)) => GameState {
                 user_model_cluster: -1,
@@ -132,7 +150,7 @@ impl Bridge {
             (None, None) => return None,
         };
         let mut view = GameView::of(&g);
-        let twins = self.gm_watch.twins.first().map(|t| {
+        let twins = self.twins.first().map(|t| {
             format!(
                 "two game managers beat (pids {} and {}): stop one",
                 t.pids.0, t.pids.1
@@ -149,21 +167,11 @@ impl Bridge {
     }
 
     /// The game view for the child page: paused while the game manager is lost.
-    pub(crate) fn child_view(&self) -> Option<GameView> {
-        let mut view = GameView::for_child(self.game.as_ref()?);
-        if self.gm_watch.lost() {
+    pub(crate) fn child_view(&self, game: Option<&GameState>) -> Option<GameView> {
+        let mut view = GameView::for_child(game?);
+        if self.lost() {
             view.phase = GameState::phase_name(GameState::PAUSED);
         }
         Some(view)
-    }
-
-    /// Sends both pages the game as it now stands.
-    pub(crate) fn show_game(&self, out: &mut Vec<Output>) {
-        if let Some(v) = self.therapist_view() {
-            self.broadcast(Role::Therapist, &ServerMessage::Game(v), out);
-        }
-        if let Some(v) = self.child_view() {
-            self.broadcast(Role::Child, &ServerMessage::Game(v), out);
-        }
     }
 }

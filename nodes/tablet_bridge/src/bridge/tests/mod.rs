@@ -3,6 +3,9 @@
 //! are in the submodules.
 
 use super::*;
+use qt_therapy_msgs::{
+    Decision, ExpectedEngagement, SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
+};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
