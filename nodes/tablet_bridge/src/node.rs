@@ -8,12 +8,12 @@ use crate::bridge::Bridge;
 use crate::io::{ClientId, DdsInput, Now, Output};
 use crate::params::TabletBridgeParams;
 use crate::protocol::Role;
-use crate::server::{OUTGOING_QUEUE, Publish};
 use node_shell::{Bus, Clock};
 use qt_therapy_msgs::topics::{
     ACTION_PROPOSAL, DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT,
     TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
 };
+use qt_therapy_msgs::{TabletAnswer, TherapistCommand};
 use std::collections::BTreeMap;
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::Instant;
@@ -38,6 +38,16 @@ pub enum PageEvent {
     /// A binary message of this many bytes (the pages never send one).
     Binary(ClientId, usize),
     Disconnect(ClientId),
+}
+
+/// Messages queued for one page before it counts as too slow and is dropped.
+pub(crate) const OUTGOING_QUEUE: usize = 256;
+
+/// What the bridge publishes on the bus; the node hands these to its outboxes.
+#[derive(Debug, Clone)]
+pub enum Publish {
+    Command(TherapistCommand),
+    Answer(TabletAnswer),
 }
 
 /// What the core sends a page.

@@ -6,7 +6,7 @@
 //! HTTP tests).
 
 use crate::io::DdsInput;
-use crate::node::{EVENT_QUEUE, PageEvent, ToPage, run_core};
+use crate::node::{EVENT_QUEUE, OUTGOING_QUEUE, PageEvent, Publish, ToPage, run_core};
 use crate::pages::Pages;
 use crate::params::TabletBridgeParams;
 use crate::protocol::{Role, ServerMessage};
@@ -17,20 +17,10 @@ use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use qt_therapy_msgs::{TabletAnswer, TherapistCommand};
 use std::sync::Arc;
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot, watch};
 
-/// What the bridge publishes on the bus; the node hands these to its outboxes.
-#[derive(Debug, Clone)]
-pub enum Publish {
-    Command(TherapistCommand),
-    Answer(TabletAnswer),
-}
-
-/// Messages queued for one page before it counts as too slow and is dropped.
-pub(crate) const OUTGOING_QUEUE: usize = 256;
 /// WebSocket close code "policy violation".
 const CLOSE_POLICY: u16 = 1008;
 
