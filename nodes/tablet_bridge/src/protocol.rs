@@ -664,4 +664,47 @@ mod tests {
         assert_eq!(v["user_id"], "");
         assert_eq!(GameState::phase_name(200), "unknown");
     }
+
+    /// The result row the therapist page reads, byte for byte: which of the message's fields
+    /// it gets, in which order, and the scores added to them.
+    #[test]
+    fn a_result_view_is_the_pages_json_of_the_message() {
+        let r = SequenceResult {
+            session_id: "s1".into(),
+            user_id: "child-7".into(),
+            user_model_cluster: 2,
+            sequence_index: 3,
+            action: 2,
+            level: 3,
+            feedback: 1,
+            overridden: true,
+            sequence: vec!["happy".into(), "sad".into(), "angry".into()],
+            answer: vec!["happy".into(), "sad".into(), "sad".into()],
+            outcome: -1,
+            activity_result: 0.5,
+            engagement: 0.1,
+            engagement_per_second: vec![0.25, -1.0],
+            response_time: 12.7,
+            sequences_planned: 10,
+            ..Default::default()
+        };
+        let earlier = SequenceResult {
+            sequence_index: 2,
+            level: 2,
+            outcome: 1,
+            ..r.clone()
+        };
+        let tally = Tally::of(&[earlier, r.clone()]);
+        let json = serde_json::to_string(&ServerMessage::Result(ResultView::of(&r, &tally)))
+            .expect("serialises");
+        assert_eq!(
+            json,
+            r#"{"type":"result","session_id":"s1","sequence_index":3,"level":3,"feedback":1,"#
+                .to_owned()
+                + r#""overridden":true,"sequence":["happy","sad","angry"],"#
+                + r#""answer":["happy","sad","sad"],"outcome":-1,"timed_out":false,"#
+                + r#""engagement":0.1,"response_time":12.7,"score":-3,"session_score":-1,"#
+                + r#""session_max_score":5}"#
+        );
+    }
 }
