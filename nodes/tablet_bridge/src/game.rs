@@ -42,8 +42,8 @@ impl GameHistory {
         self.session_results
             .retain(|k| k.sequence_index != r.sequence_index);
         self.session_results.push(r.clone());
-        let view = ResultView::of(&r, &Tally::of(&self.session_results));
-        push_for_session(&mut self.results, view.clone(), |v| &v.session_id);
+        let view = ResultView::of(r, &Tally::of(&self.session_results));
+        push_for_session(&mut self.results, view.clone(), ResultView::session_id);
         view
     }
 

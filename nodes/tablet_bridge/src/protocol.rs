@@ -404,45 +404,55 @@ impl ProposalView {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// A sequence's result as the therapist page's results table shows it: some of the
+/// message's fields under their own names, then the scores. The page's JSON is a contract of
+/// its own, so a view keeps it; the message's serde is its DDS (CDR) encoding and cannot take
+/// the page's attributes. The view holds the message, and the fields the page gets are named
+/// once, where it is serialised.
+#[derive(Debug, Clone, PartialEq)]
 pub struct ResultView {
-    pub session_id: String,
-    pub sequence_index: u8,
-    pub level: u8,
-    pub feedback: u8,
-    pub overridden: bool,
-    pub sequence: Vec<String>,
-    pub answer: Vec<String>,
-    pub outcome: i8,
-    pub timed_out: bool,
-    pub engagement: f32,
-    pub response_time: f32,
-    /// The paper's score of the sequence, L·O.
-    pub score: i32,
+    result: SequenceResult,
     /// The session's score so far and the best it could be with its levels.
-    pub session_score: i32,
-    pub session_max_score: i32,
+    session_score: i32,
+    session_max_score: i32,
 }
 
 impl ResultView {
     /// `r` with the tally of its session so far (`r` included).
-    pub fn of(r: &SequenceResult, session: &Tally) -> Self {
+    pub fn of(r: SequenceResult, session: &Tally) -> Self {
         ResultView {
-            session_id: r.session_id.clone(),
-            sequence_index: r.sequence_index,
-            level: r.level,
-            feedback: r.feedback,
-            overridden: r.overridden,
-            sequence: r.sequence.clone(),
-            answer: r.answer.clone(),
-            outcome: r.outcome,
-            timed_out: r.timed_out,
-            engagement: r.engagement,
-            response_time: r.response_time,
-            score: r.score(),
+            result: r,
             session_score: session.score,
             session_max_score: session.max_score,
         }
+    }
+
+    pub fn session_id(&self) -> &String {
+        &self.result.session_id
+    }
+}
+
+impl Serialize for ResultView {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct as _;
+        let r = &self.result;
+        let mut row = s.serialize_struct("ResultView", 14)?;
+        row.serialize_field("session_id", &r.session_id)?;
+        row.serialize_field("sequence_index", &r.sequence_index)?;
+        row.serialize_field("level", &r.level)?;
+        row.serialize_field("feedback", &r.feedback)?;
+        row.serialize_field("overridden", &r.overridden)?;
+        row.serialize_field("sequence", &r.sequence)?;
+        row.serialize_field("answer", &r.answer)?;
+        row.serialize_field("outcome", &r.outcome)?;
+        row.serialize_field("timed_out", &r.timed_out)?;
+        row.serialize_field("engagement", &r.engagement)?;
+        row.serialize_field("response_time", &r.response_time)?;
+        // The paper's score of the sequence, L·O.
+        row.serialize_field("score", &r.score())?;
+        row.serialize_field("session_score", &self.session_score)?;
+        row.serialize_field("session_max_score", &self.session_max_score)?;
+        row.end()
     }
 }
 
@@ -695,7 +705,7 @@ mod tests {
             ..r.clone()
         };
         let tally = Tally::of(&[earlier, r.clone()]);
-        let json = serde_json::to_string(&ServerMessage::Result(ResultView::of(&r, &tally)))
+        let json = serde_json::to_string(&ServerMessage::Result(ResultView::of(r, &tally)))
             .expect("serialises");
         assert_eq!(
             json,
