@@ -2,15 +2,14 @@
 //! within the session: stale, duplicated and wrong-session commands are rejected with a
 //! reason (log and GameState.status) and the session goes on. An emergency stop for the
 //! running session is honoured even with an out-of-order id: silencing the robot is never
-//! the unsafe choice.
+//! the unsafe choice. What a command carried out does to the session is `session.rs`'s.
 
 use super::propose::Settled;
-use super::{CommandAnswer, Current, GameManager, PendingOverride, Phase, Session, Timer};
+use super::{CommandAnswer, GameManager, PendingOverride, Phase, Session};
 use crate::protocol::{LogLevel, Output};
-use crate::sequence::SessionRng;
 use crate::session_file::{JournalCommand, JournalEntry, SessionEnd};
 use qt_therapy_msgs::{Command, GameState, TherapistCommand};
-use sequence_game::{Action, Feedback, Level, State};
+use sequence_game::{Action, Feedback, Level};
 
 fn command_name(code: u8) -> &'static str {
     Command::try_from(code).map_or("unknown", Command::name)
@@ -217,10 +216,6 @@ impl GameManager {
         }
     }
 
-    pub(super) fn sequences(&self) -> u8 {
-        self.params.sequences_per_session as u8
-    }
-
     /// The sequence an override now applies to: the one being decided, else the next.
     fn override_target(&self) -> u8 {
         let index = self.session.as_ref().map_or(1, |s| s.index);
@@ -259,149 +254,6 @@ impl GameManager {
                 sequence_index: over.map(|(i, _)| i),
                 at_ns: now,
             })));
-    }
-
-    fn start_session(&mut self, c: &TherapistCommand, now: i64) {
-        self.used_sessions.insert(c.session_id.clone());
-        self.out
-            .push(Output::Journal(Box::new(JournalEntry::Started {
-                session_id: c.session_id.clone(),
-                user_id: c.user_id.clone(),
-                user_model_cluster: c.user_model_cluster,
-                command_id: c.command_id,
-                at_ns: now,
-            })));
-        self.engagement.clear();
-        self.timers.forget_all();
-        self.proposals.new_session();
-        self.current = Current::default();
-        self.session = Some(Session {
-            id: c.session_id.clone(),
-            user_id: c.user_id.clone(),
-            cluster: c.user_model_cluster,
-            last_command_id: c.command_id,
-            rng: SessionRng::new(self.params.seed, &c.session_id),
-            state: State::START,
-            index: 1,
-            next_sequence_id: 1,
-            pending_override: None,
-            paused_since: None,
-            held_since: None,
-            talk_start_ns: now,
-            started_ns: now,
-            results: Vec::new(),
-            closed_task: None,
-            fallbacks: 0,
-            overrides: 0,
-            rejected_commands: 0,
-            rejected_answers: 0,
-        });
-        self.out.push(Output::LiveLine(format!(
-            "session {:?} started for user {:?} (cluster {}), command {}",
-            c.session_id, c.user_id, c.user_model_cluster, c.command_id
-        )));
-        self.set_phase(
-            Phase::Deciding,
-            format!(
-                "session started: introduction, deciding sequence 1/{}",
-                self.sequences()
-            ),
-            now,
-        );
-        let intro = self.utterances.intro();
-        self.act(intro);
-        let at = now + self.scaled_ns(self.params.intro_time_s);
-        self.after_robot(Timer::SpeechDone, at);
-        self.request_decision(now);
-    }
-
-    fn pause(&mut self, command_id: u64, now: i64) {
-        let was_paused = self.paused();
-        if let Some(s) = self.session.as_mut() {
-            s.paused_since = Some(now);
-        }
-        if !was_paused {
-            self.suspend(now);
-        }
-        self.status = format!("paused by the therapist (command {command_id})");
-        self.publish_state(now);
-    }
-
-    /// Stops what the robot is doing for a pause or a hold.
-    pub(super) fn suspend(&mut self, now: i64) {
-        match self.phase {
-            Phase::GivingFeedback | Phase::SayingSequence => {
-                // A half-said sequence is not fair to the child: say it again on resume.
-                self.drop_robot_step();
-                self.drop_timers(|t| {
-                    !matches!(
-                        t,
-                        Timer::FeedbackDone | Timer::Word(_) | Timer::SequenceSaid
-                    )
-                });
-            }
-            Phase::WaitingForAnswer => {
-                self.drop_timers(|t| *t != Timer::AnswerTimeout);
-                self.current.answer_left_ns = Some((self.current.answer_deadline_ns - now).max(0));
-            }
-            // Nobody can answer a proposal while the game stands still.
-            Phase::Deciding => self.stop_countdown(),
-            _ => {}
-        }
-    }
-
-    fn resume(&mut self, command_id: u64, now: i64) {
-        let paused_for = self
-            .session
-            .as_mut()
-            .and_then(|s| s.paused_since.take())
-            .map_or(0, |since| now - since);
-        self.log(
-            LogLevel::INFO,
-            format!("resumed after {:.1} s", paused_for as f64 * 1e-9),
-        );
-        if self.paused() {
-            // publish_state names the lost nodes.
-            self.status = format!(
-                "resumed by the therapist (command {command_id}); still held until the node is back"
-            );
-            self.publish_state(now);
-            return;
-        }
-        self.continue_play(&format!("resumed (command {command_id})"), now);
-    }
-
-    /// Goes on where a pause or a hold stopped; `why` starts the status.
-    pub(super) fn continue_play(&mut self, why: &str, now: i64) {
-        match self.phase {
-            Phase::GivingFeedback | Phase::SayingSequence => {
-                // Say why first; the presentation then publishes its own status.
-                self.status = why.to_string();
-                self.publish_state(now);
-                self.start_presentation(now)
-            }
-            Phase::WaitingForAnswer => {
-                let left = self.current.answer_left_ns.take().unwrap_or(0);
-                self.current.answer_deadline_ns = now + left;
-                self.set_timer(Timer::AnswerTimeout, now + left);
-                self.status = format!("{why}: waiting for the answer");
-                self.publish_state(now);
-            }
-            _ => {
-                self.status = why.to_string();
-                self.publish_state(now);
-                // No action for the sequence yet: a recovered session (asked now rather than
-                // at recovery, when the policy may not be up), a request that ran out while
-                // the session was held or paused, or one still pending, which may have gone
-                // to a policy that died meanwhile (its answer, if any, is then superseded).
-                if self.phase == Phase::Deciding && self.proposals.is_open() {
-                    self.start_countdown(now);
-                } else if self.phase == Phase::Deciding && self.current.plan.is_none() {
-                    self.ask_policy_again("the session goes on", now);
-                }
-                self.maybe_present(now);
-            }
-        }
     }
 
     /// The therapist sets the next sequence's level or feedback (replacing a proposal open

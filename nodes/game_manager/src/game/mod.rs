@@ -1,24 +1,26 @@
 //! The session state machine, sans-IO: `handle(input, now)` returns what to do, in order.
 //! One session at a time: decide (policy, override or fallback) -> feedback -> say the
 //! sequence -> tablet task -> answer or timeout -> score with engagement -> next, x omega.
-//! The therapist can start, pause, resume, stop, override the next level or emergency-stop.
-//! A watched node that stops its heartbeat holds the session, with the robot silent. A
-//! session a killed node left unfinished is taken over, paused (`recover`). A decision the
-//! policy is unsure of is proposed to the therapist first (`propose`).
+//! The therapist can start, pause, resume, stop, override the next level or emergency-stop
+//! (`commands`). A watched node that stops its heartbeat holds the session, with the robot
+//! silent (`watch`). A session a killed node left unfinished is taken over, paused
+//! (`recover`). A decision the policy is unsure of is proposed to the therapist first
+//! (`propose`). The phase changes in two places: the session's (start, pause, hold, resume,
+//! end) in `session`, a sequence's (feedback, words, task, answer, score, next) in `play`.
 
 mod commands;
 mod decide;
-mod outcome;
-mod present;
+mod play;
 mod propose;
 mod recover;
 mod robot;
+mod session;
 #[cfg(test)]
 mod tests;
 mod timers;
 mod watch;
 
-pub use recover::RECOVERED_STATUS;
+pub use session::RECOVERED_STATUS;
 
 use crate::params::{GameManagerParams, ParamError};
 use crate::protocol::{Input, LogLevel, Output};
@@ -254,6 +256,27 @@ impl GameManager {
         }
         self.settle_robot();
         std::mem::take(&mut self.out)
+    }
+
+    /// What a game timer (or the robot step it stood for) sets off.
+    fn on_timer(&mut self, timer: Timer, now: i64) {
+        match timer {
+            Timer::PolicyDeadline { request_id } => self.on_policy_deadline(request_id, false, now),
+            Timer::PolicyHeartbeatLook { request_id } => {
+                self.on_policy_deadline(request_id, true, now)
+            }
+            Timer::SpeechDone => self.speech_done(now),
+            Timer::FeedbackDone => self.start_words(now),
+            Timer::Word(i) => self.say_word(i),
+            Timer::SequenceSaid => self.send_task(now),
+            Timer::AnswerTimeout => self.answer_timed_out(now),
+            Timer::Settled => self.finalize(now, true),
+            Timer::ProposalRunsOut => self.on_proposal_runs_out(now),
+        }
+    }
+
+    fn sequences(&self) -> u8 {
+        self.params.sequences_per_session as u8
     }
 
     fn scaled_ns(&self, seconds: f64) -> i64 {

@@ -3,17 +3,14 @@
 //! been moved, the therapist decides when to go on. Its RESUME plays the next unplayed
 //! sequence from its start (an interrupted one again, as after a pause); every result, the
 //! state (L, F, PS), the command ids carried out and the task ids sent carry over, so nothing
-//! is played, scored or carried out twice.
+//! is played, scored or carried out twice. Here the files become a `Session`; taking it over
+//! is `session.rs`'s.
 
-use super::{Current, GameManager, PendingOverride, Phase, Session};
+use super::{GameManager, PendingOverride, Session};
 use crate::protocol::{LogLevel, Output};
 use crate::recovery::RecoveredSession;
 use crate::sequence::SessionRng;
-use crate::session_file::{JournalEntry, SessionEnd};
 use sequence_game::{Emotion, Feedback, Level, Outcome, State};
-
-/// GameState.status of a recovered session until the therapist acts.
-pub const RECOVERED_STATUS: &str = "recovered after a game manager restart; resume to go on";
 
 impl GameManager {
     /// Session ids used before this node started (their files are in the sessions
@@ -32,9 +29,15 @@ impl GameManager {
                 format!("recovering {:?}: {d}", r.session_id),
             );
         }
-        let next = r.next_index();
+        let session = self.recovered_session(&r, now);
+        self.take_over(session, r.damage, now);
+        std::mem::take(&mut self.out)
+    }
+
+    /// The session `r`'s files tell, paused since `now`.
+    fn recovered_session(&mut self, r: &RecoveredSession, now: i64) -> Session {
         let last = r.records.last();
-        // The state after the last result, as scoring it made it (outcome.rs). Validated
+        // The state after the last result, as scoring it made it (play.rs). Validated
         // records always give one; the start state is the safe answer anyway.
         let state = last
             .and_then(|l| {
@@ -46,31 +49,21 @@ impl GameManager {
                 ))
             })
             .unwrap_or(State::START);
-        let rng = self.replayed_rng(&r);
+        let rng = self.replayed_rng(r);
         let pending_override = r.pending_override.map(|(i, action)| PendingOverride {
             sequence_index: i,
             action,
             command_id: 0,
         });
         let results: Vec<_> = r.records.iter().map(|x| x.result.clone()).collect();
-        self.used_sessions.insert(r.session_id.clone());
-        self.engagement.clear();
-        self.timers.forget_all();
-        // Only the session file's records come back; proposals live in the bag.
-        self.proposals.new_session();
-        self.current = Current {
-            // No reaction is due: the sequence is presented as soon as the action is known.
-            speech_done: true,
-            ..Current::default()
-        };
-        self.session = Some(Session {
+        Session {
             id: r.session_id.clone(),
             user_id: r.user_id.clone(),
             cluster: r.user_model_cluster,
             last_command_id: r.last_command_id,
             rng,
             state,
-            index: next,
+            index: r.next_index(),
             next_sequence_id: r.last_task_id.saturating_add(1),
             pending_override,
             paused_since: Some(now),
@@ -83,47 +76,7 @@ impl GameManager {
             rejected_commands: 0,
             rejected_answers: r.records.iter().map(|x| x.rejected_answers).sum(),
             results,
-        });
-        let played = r.records.len();
-        let planned = self.sequences();
-        if next > planned {
-            // Killed between the last record and the summary: nothing is left to play.
-            self.phase = Phase::Deciding;
-            self.end_session(
-                SessionEnd::Finished,
-                "all sequences played (summary written after a game manager restart)",
-                now,
-            );
-            return std::mem::take(&mut self.out);
         }
-        self.out
-            .push(Output::Journal(Box::new(JournalEntry::Recovered {
-                session_id: r.session_id.clone(),
-                results: played as u8,
-                next_sequence: next,
-                damage: r.damage.clone(),
-                at_ns: now,
-            })));
-        let damaged = if r.damage.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; {} damaged or doubtful line(s) in its files, see the log",
-                r.damage.len()
-            )
-        };
-        let line = format!(
-            "session {:?} {RECOVERED_STATUS} ({played} of {planned} sequences kept, \
-             sequence {next} next{damaged})",
-            r.session_id
-        );
-        self.out.push(Output::Alarm(line));
-        self.set_phase(
-            Phase::Deciding,
-            format!("{RECOVERED_STATUS} (sequence {next}/{planned} next{damaged})"),
-            now,
-        );
-        std::mem::take(&mut self.out)
     }
 
     /// The session's random streams advanced past the recorded sequences, so the rest of the

@@ -289,26 +289,6 @@ impl GameManager {
         if then == Timer::SpeechDone {
             self.current.speech_done = true;
         }
-        let running = self.session_running();
-        let paused = match self.session.as_mut() {
-            Some(s) if running => {
-                s.paused_since.get_or_insert(now);
-                true
-            }
-            _ => false,
-        };
-        if paused {
-            self.suspend(now);
-            self.out.push(Output::Alarm(format!(
-                "the robot did not finish ({reason}): session paused; resume to go on"
-            )));
-            self.status = format!("the robot did not finish ({reason}): paused, resume to go on");
-            self.publish_state(now);
-        } else {
-            self.log(
-                LogLevel::WARN,
-                format!("the robot did not finish ({reason})"),
-            );
-        }
+        self.pause_for_robot(reason, now);
     }
 }

@@ -1,8 +1,9 @@
-//! What the game manager does when a node it watches (`watched_nodes`, bookkept by the shared
-//! [`HeartbeatWatch`]) goes silent for `node_loss_timeout_s`. A lost node means: the
+//! The game manager's watch of the nodes in `watched_nodes` (bookkept by the shared
+//! [`HeartbeatWatch`]): one silent for `node_loss_timeout_s` is lost. A lost node means: the
 //! robot is silenced and the session held (paused, not lost) until every watched node is
-//! back; then it resumes by itself, or waits for the therapist's resume. One watchdog timer,
-//! due when the earliest-heard node would time out, so a loss is seen exactly at the timeout.
+//! back; then it resumes by itself, or waits for the therapist's resume (`session.rs`: hold,
+//! release). One watchdog timer, due when the earliest-heard node would time out, so a loss
+//! is seen exactly at the timeout.
 //! A node started twice (two processes beating under its name, each answering on its own) is
 //! told on the operator's terminal and kept in GameState.status until one of them stops.
 
@@ -123,41 +124,12 @@ impl GameManager {
             })
             .collect();
         if !lost.is_empty() {
-            self.on_nodes_lost(&lost.join(", "), now);
+            let what = lost.join(", ");
+            self.log(LogLevel::WARN, format!("node lost: {what}"));
+            self.hold(&what, now);
         }
         self.update_twins(now);
         self.arm_watchdog();
-    }
-
-    /// Silences the robot and holds the session.
-    fn on_nodes_lost(&mut self, what: &str, now: i64) {
-        self.log(LogLevel::WARN, format!("node lost: {what}"));
-        let running = self.session_running();
-        let was_paused = self.paused();
-        if running
-            && let Some(s) = self.session.as_mut()
-            && s.held_since.is_none()
-        {
-            s.held_since = Some(now);
-            if !was_paused {
-                // Silence first: it stops the robot mid-sentence.
-                self.silence_robot(now);
-                self.suspend(now);
-            }
-        }
-        let line = if running {
-            self.status = if self.params.auto_resume_after_node_loss {
-                "session paused, robot silent; it resumes when the node is back".into()
-            } else {
-                "session paused, robot silent; resume it when the node is back".into()
-            };
-            format!("node lost: {what}: session paused, robot silent")
-        } else {
-            self.status = "a session cannot start until the node is back".into();
-            format!("node lost: {what}")
-        };
-        self.out.push(Output::Alarm(line));
-        self.publish_state(now);
     }
 
     /// A lost node is back; when none is lost any more the session may go on.
@@ -167,38 +139,6 @@ impl GameManager {
             seconds(lost_for)
         );
         self.out.push(Output::LiveLine(back.clone()));
-        if !self.lost_nodes().is_empty() {
-            self.status = back;
-            self.publish_state(now);
-            return;
-        }
-        let held_since = self.session.as_mut().and_then(|s| s.held_since.take());
-        let Some(held_since) = held_since.filter(|_| self.session_running()) else {
-            self.status = back;
-            self.publish_state(now);
-            return;
-        };
-        let therapist_paused = self.paused();
-        if !self.params.auto_resume_after_node_loss {
-            if let Some(s) = self.session.as_mut()
-                && s.paused_since.is_none()
-            {
-                s.paused_since = Some(held_since);
-            }
-            self.status = format!("{back}: waiting for the therapist's resume");
-            self.publish_state(now);
-        } else if therapist_paused {
-            self.status = format!("{back}; still paused by the therapist");
-            self.publish_state(now);
-        } else {
-            self.log(
-                LogLevel::INFO,
-                format!(
-                    "resumed after {:.1} s held for lost nodes",
-                    seconds(now - held_since)
-                ),
-            );
-            self.continue_play(&format!("{back}: resumed"), now);
-        }
+        self.release(back, now);
     }
 }

@@ -1,19 +1,156 @@
-//! The end of a sequence and of a session: take the answer (or the timeout), wait for the
-//! period's last engagement windows, score and record it, move on; and end the session with
-//! its summary on finish, stop, emergency stop or shutdown.
+//! One sequence played: the feedback line with its face and gesture, then the emotions one
+//! word (and face) at a time, then the task on the tablet; the answer (or the timeout); the
+//! wait for the period's last engagement windows; the score and the record; then the next
+//! sequence's decision, or the session's end after the last. Each step is a phase of the
+//! game, and this is where it changes.
 
 use super::{Current, GameManager, Phase, Timer};
-use crate::protocol::Output;
-use crate::session_file::{SequenceRecord, SessionEnd, SessionSummary};
+use crate::protocol::{LogLevel, Output};
+use crate::session_file::{JournalEntry, SequenceRecord, SessionEnd};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer};
-use sequence_game::{Emotion, State};
-use sequence_game::{parse_answer, score};
-use session_tally::Tally;
+use qt_therapy_msgs::{BehaviourState, SequenceResult, TabletAnswer, TabletTask};
+use sequence_game::{Emotion, Feedback, State, parse_answer, score};
 use session_tally::live_line::sequence_line;
 
 impl GameManager {
+    /// The introduction or the reaction has been said: the sequence may be presented.
+    pub(super) fn speech_done(&mut self, now: i64) {
+        self.current.speech_done = true;
+        self.maybe_present(now);
+    }
+
+    /// Starts the presentation once the action is known, the robot is quiet and not paused.
+    pub(super) fn maybe_present(&mut self, now: i64) {
+        if self.phase == Phase::Deciding
+            && self.current.plan.is_some()
+            && self.current.speech_done
+            && !self.paused()
+        {
+            self.start_presentation(now);
+        }
+    }
+
+    /// Feedback (if any), then the words; again from the start after a pause.
+    pub(super) fn start_presentation(&mut self, now: i64) {
+        let Some(plan) = self.current.plan.clone() else {
+            return;
+        };
+        let max_run = self.params.max_identical_in_a_row as usize;
+        let index = self.session.as_ref().map_or(0, |s| s.index);
+        if self.current.sequence.is_empty()
+            && let Some(s) = self.session.as_mut()
+        {
+            self.current.sequence = s.rng.sequence(plan.level, max_run);
+        }
+        if plan.feedback == Feedback::None {
+            self.start_words(now);
+            return;
+        }
+        let count = self.utterances.feedback_line_count(plan.feedback);
+        let line = match (self.current.feedback_line, self.session.as_mut()) {
+            (Some(l), _) => l,
+            (None, Some(s)) => s.rng.line(count),
+            (None, None) => 0,
+        };
+        self.current.feedback_line = Some(line);
+        self.set_phase(
+            Phase::GivingFeedback,
+            format!("sequence {index}: {} feedback", plan.feedback.name()),
+            now,
+        );
+        if let Some(act) = self.utterances.feedback(plan.feedback, line) {
+            self.act(act);
+        }
+        let at = now + self.scaled_ns(self.params.feedback_time_s);
+        self.after_robot(Timer::FeedbackDone, at);
+    }
+
+    pub(super) fn start_words(&mut self, now: i64) {
+        let index = self.session.as_ref().map_or(0, |s| s.index);
+        let n = self.current.sequence.len();
+        self.current.words_started_ns = now;
+        self.set_phase(
+            Phase::SayingSequence,
+            format!("sequence {index}: saying {n} emotions"),
+            now,
+        );
+        // Each word sits in the middle of its slot: the robot takes a breath first, and a
+        // listener that follows GameState (DDS does not order messages across topics) has
+        // SAYING_SEQUENCE before the first face.
+        let per = self.scaled_ns(self.params.speaking_time_per_emotion_s);
+        self.set_timer(Timer::Word(0), now + per / 2);
+    }
+
+    pub(super) fn say_word(&mut self, i: usize) {
+        let Some(emotion) = self.current.sequence.get(i).copied() else {
+            return;
+        };
+        let act = self.utterances.emotion_word(emotion);
+        self.act(act);
+        let n = self.current.sequence.len();
+        let per = self.scaled_ns(self.params.speaking_time_per_emotion_s);
+        let t0 = self.current.words_started_ns;
+        let slot_middle = |k: i64| t0 + per * k + per / 2;
+        if i + 1 < n {
+            self.after_robot(Timer::Word(i + 1), slot_middle(i as i64 + 1));
+        } else {
+            let total = self.scaled_ns(self.params.speaking_time_s(n));
+            self.after_robot(Timer::SequenceSaid, (t0 + total).max(slot_middle(i as i64)));
+        }
+    }
+
+    pub(super) fn send_task(&mut self, now: i64) {
+        let Some(s) = self.session.as_mut() else {
+            return;
+        };
+        let sequence_id = s.next_sequence_id;
+        s.next_sequence_id += 1;
+        let (session_id, index) = (s.id.clone(), s.index);
+        let timeout = self.scaled_ns(self.params.answer_timeout_s);
+        // Journalled first: a restarted node must not send this id again (tablets ignore a
+        // task id they already saw).
+        self.out.push(Output::Journal(Box::new(JournalEntry::Task {
+            session_id: session_id.clone(),
+            task_id: sequence_id,
+            sequence_index: index,
+            at_ns: now,
+        })));
+        self.current.sequence_id = sequence_id;
+        self.current.task_sent_ns = now;
+        self.current.answer_deadline_ns = now + timeout;
+        self.set_phase(
+            Phase::WaitingForAnswer,
+            format!("sequence {index}: waiting for the answer (task {sequence_id})"),
+            now,
+        );
+        self.out.push(Output::Task(TabletTask {
+            header: Header::at(Time::from_nanos(now)),
+            session_id,
+            sequence_id,
+            sequence_index: index,
+            length: self.current.sequence.len() as u8,
+            choices: Emotion::ALL.iter().map(|e| e.name().to_string()).collect(),
+            timeout: (timeout as f64 * 1e-9) as f32,
+        }));
+        self.set_timer(Timer::AnswerTimeout, now + timeout);
+    }
+
+    /// No answer within the task's time: counted as wrong.
+    pub(super) fn answer_timed_out(&mut self, now: i64) {
+        let index = self.session.as_ref().map_or(0, |s| s.index);
+        self.log(
+            LogLevel::WARN,
+            format!(
+                "sequence {index}: no answer within {} s: counted as wrong",
+                self.params.answer_timeout_s * self.params.time_scale
+            ),
+        );
+        self.current.timed_out = true;
+        self.current.response_time = (self.params.answer_timeout_s * self.params.time_scale) as f32;
+        self.close_task(now);
+    }
+
     pub(super) fn on_answer(&mut self, a: TabletAnswer, now: i64) {
         match self.check_answer(&a) {
             Ok(emotions) => {
@@ -170,77 +307,5 @@ impl GameManager {
             self.after_robot(Timer::SpeechDone, at);
         }
         self.request_decision(now);
-    }
-
-    /// Ends the session: scores an answered sequence first, says goodbye on a stop, silences
-    /// the robot at once on an emergency stop, and writes the summary.
-    pub(super) fn end_session(&mut self, end: SessionEnd, reason: &str, now: i64) {
-        if end == SessionEnd::EmergencyStopped {
-            self.silence_robot(now);
-        }
-        if self.phase == Phase::Settling {
-            self.finalize(now, false);
-        }
-        // After the last answer the phase still reads "waiting"; a finished session has no
-        // interrupted sequence.
-        let interrupted = end != SessionEnd::Finished
-            && matches!(
-                self.phase,
-                Phase::GivingFeedback | Phase::SayingSequence | Phase::WaitingForAnswer
-            );
-        if end == SessionEnd::Stopped {
-            let act = self.utterances.goodbye();
-            self.act(act);
-        }
-        self.withdraw_proposal(now);
-        self.timers.forget_all();
-        self.drop_robot_step();
-        self.current = Current::default();
-        let proposals = self.proposals.counts();
-        let Some(s) = self.session.as_mut() else {
-            return;
-        };
-        s.paused_since = None;
-        s.held_since = None;
-        let tally = Tally::of(&s.results);
-        let summary = SessionSummary {
-            session_id: s.id.clone(),
-            user_id: s.user_id.clone(),
-            user_model_cluster: s.cluster,
-            end,
-            reason: reason.to_string(),
-            sequences_planned: self.params.sequences_per_session as u8,
-            sequences_played: s.results.len() as u8,
-            interrupted_sequence: interrupted.then_some(s.index),
-            correct: tally.correct as u32,
-            timeouts: tally.timeouts as u32,
-            score: tally.score,
-            max_score: tally.max_score,
-            mean_engagement: tally.mean_engagement,
-            overrides: s.overrides,
-            proposals: proposals.proposed,
-            proposals_accepted: proposals.accepted,
-            proposals_replaced: proposals.replaced,
-            proposals_timed_out: proposals.timed_out,
-            policy_fallbacks: s.fallbacks,
-            rejected_commands: s.rejected_commands,
-            rejected_answers: s.rejected_answers,
-            seed: self.params.seed,
-            language: self.params.language.clone(),
-            started_ns: s.started_ns,
-            ended_ns: now,
-        };
-        let line = format!(
-            "session {:?} {reason}: {} of {} sequences, {} right, score {}/{}",
-            s.id,
-            summary.sequences_played,
-            summary.sequences_planned,
-            summary.correct,
-            summary.score,
-            summary.max_score
-        );
-        self.out.push(Output::Summary(Box::new(summary)));
-        self.out.push(Output::LiveLine(line));
-        self.set_phase(Phase::Ended(end), reason.to_string(), now);
     }
 }
