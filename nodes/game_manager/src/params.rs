@@ -426,6 +426,127 @@ mod tests {
         params.validate().expect("shipped parameters are valid");
     }
 
+    /// Every key of the parameter file, in the order an unknown key's error lists them.
+    const KEYS: [&str; 50] = [
+        "seed",
+        "sequences_per_session",
+        "max_identical_in_a_row",
+        "speaking_time_base_s",
+        "speaking_time_per_emotion_s",
+        "intro_time_s",
+        "feedback_time_s",
+        "reaction_time_s",
+        "time_scale",
+        "answer_timeout_s",
+        "policy_deadline_s",
+        "policy_startup_wait_s",
+        "engagement_wait_s",
+        "sessions_dir",
+        "language",
+        "intro_en",
+        "intro_de",
+        "encouraging_en",
+        "encouraging_de",
+        "challenging_en",
+        "challenging_de",
+        "well_done_en",
+        "well_done_de",
+        "try_again_en",
+        "try_again_de",
+        "goodbye_en",
+        "goodbye_de",
+        "emotion_words_en",
+        "emotion_words_de",
+        "intro_gesture",
+        "encouraging_emotion",
+        "encouraging_gesture",
+        "challenging_emotion",
+        "challenging_gesture",
+        "well_done_emotion",
+        "try_again_emotion",
+        "goodbye_gesture",
+        "watched_nodes",
+        "node_loss_timeout_s",
+        "auto_resume_after_node_loss",
+        "recovery_max_age_s",
+        "robot_backend",
+        "robot_call_timeout_s",
+        "robot_gesture_speed",
+        "qtrobot_ros2_stop_namespace",
+        "supervised_autonomy",
+        "propose_above_temperature",
+        "propose_above_success_std",
+        "proposal_countdown_s",
+        "user_model_file",
+    ];
+
+    fn load(body: &str) -> Result<GameManagerParams, node_shell::params::ParamsError> {
+        let path = Path::new("game_manager.yaml");
+        let yaml = format!("game_manager:\n  ros__parameters:\n{body}");
+        let map = node_shell::params::parameter_map_from_str(&yaml, path, "game_manager")
+            .expect("YAML with the node's section");
+        node_shell::params::parameters_from_map(map, path, "game_manager")
+    }
+
+    /// The file stays flat and strict: an unknown key is refused naming it and every key
+    /// the node takes, a value of the wrong type is refused naming its key, and each key
+    /// sets its own parameter.
+    #[test]
+    fn the_file_is_flat_and_a_bad_key_is_named() {
+        let listed: Vec<String> = KEYS.iter().map(|k| format!("`{k}`")).collect();
+        let err = load("    time_scael: 0.1\n").expect_err("an unknown key");
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "parameter file game_manager.yaml: game_manager.ros__parameters.time_scael: \
+                 unknown field `time_scael`, expected one of {}",
+                listed.join(", ")
+            )
+        );
+        for key in KEYS {
+            // No parameter takes null.
+            let err = load(&format!("    {key}: null\n")).expect_err(key);
+            match err {
+                node_shell::params::ParamsError::Key { key: named, .. } => {
+                    assert_eq!(named, key)
+                }
+                other => panic!("{key}: {other}"),
+            }
+        }
+        let err = load("    time_scale: \"fast\"\n").expect_err("a word for a number");
+        assert_eq!(
+            err.to_string(),
+            "parameter file game_manager.yaml: game_manager.ros__parameters.time_scale: \
+             invalid type: string \"fast\", expected f64"
+        );
+        let p = load(
+            "    seed: 7\n    time_scale: 0.5\n    sessions_dir: \"s\"\n    goodbye_de: \"ciao\"\n    \
+             recovery_max_age_s: 60.0\n    robot_gesture_speed: 2.0\n    proposal_countdown_s: 9.0\n",
+        )
+        .expect("valid keys");
+        let set = (
+            p.seed,
+            p.time_scale,
+            p.sessions_dir.as_str(),
+            p.goodbye_de.as_str(),
+            p.recovery_max_age_s,
+            p.robot_gesture_speed,
+            p.proposal_countdown_s,
+        );
+        assert_eq!(set, (7, 0.5, "s", "ciao", 60.0, 2.0, 9.0));
+        let rest = GameManagerParams {
+            seed: 7,
+            time_scale: 0.5,
+            sessions_dir: "s".into(),
+            goodbye_de: "ciao".into(),
+            recovery_max_age_s: 60.0,
+            robot_gesture_speed: 2.0,
+            proposal_countdown_s: 9.0,
+            ..Default::default()
+        };
+        assert_eq!(p, rest, "the keys not given keep their defaults");
+    }
+
     #[test]
     fn default_speaking_times_are_the_authors() {
         let p = GameManagerParams::default();
