@@ -513,8 +513,8 @@ impl GameDriver {
 /// node watched; the test checks that no node was lost in the recorded session instead.
 fn replay_game(sample: &Sample, reader: &BagReader) -> GameReplay {
     let mut p: GameManagerParams = params("game_manager");
-    p.seed = sample.game_seed;
-    p.time_scale = sample.time_scale;
+    p.session.seed = sample.game_seed;
+    p.timing.time_scale = sample.time_scale;
     let mut inputs: Vec<(i64, Recorded)> = Vec::new();
     inputs.extend(
         recorded::<TherapistCommand>(reader, THERAPIST_COMMAND.name)

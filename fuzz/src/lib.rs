@@ -221,7 +221,7 @@ pub const PARAMETER_NODES: [(&str, ParamsReader); 9] = [
             && p.validate().is_ok()
         {
             for emotions in 0..=7 {
-                let _ = p.speaking_time_s(emotions);
+                let _ = p.timing.speaking_time_s(emotions);
             }
         }
     }),

@@ -42,7 +42,7 @@ async fn main() -> anyhow::Result<()> {
         Some(dir) => dir.clone(),
         None => {
             let (params, _): (GameManagerParams, _) = args.shell.parameters(NODE)?;
-            params.sessions_dir.into()
+            params.files.sessions_dir.into()
         }
     };
     // Held while the node runs: a second game manager on the same directory would recover
@@ -52,7 +52,7 @@ async fn main() -> anyhow::Result<()> {
         InstanceLock::acquire(&sessions_dir, NODE, "session files").context("sessions_dir")?;
     let (mut shell, mut params): (NodeShell, GameManagerParams) =
         NodeShell::start(NODE, &args.shell)?;
-    params.sessions_dir = sessions_dir.display().to_string();
+    params.files.sessions_dir = sessions_dir.display().to_string();
     // Parameter errors name the file actually read (--params-file, QT_PARAMS_DIR or params/).
     let params_file = args.shell.params_path(shell.name());
     let result = game_manager::node::run(&mut shell, params, &params_file).await;

@@ -44,9 +44,10 @@ pub async fn run(
 ) -> anyhow::Result<()> {
     let mut core = GameManager::new(params.clone())
         .with_context(|| format!("parameter file {}", params_file.display()))?;
-    if params.supervised_autonomy && !params.user_model_file.is_empty() {
+    let supervision = &params.supervision;
+    if supervision.supervised_autonomy && !supervision.user_model_file.is_empty() {
         // The σ rule reads the same models as the policy; a file it cannot use is named.
-        let path = std::path::Path::new(&params.user_model_file);
+        let path = std::path::Path::new(&supervision.user_model_file);
         let models = user_models::UserModelSet::load(path).with_context(|| {
             format!(
                 "user_model_file (supervised autonomy's σ rule) in {}",
@@ -55,16 +56,16 @@ pub async fn run(
         })?;
         tracing::info!(file = %path.display(), clusters = models.cluster_count(),
             "supervised autonomy: proposing decisions above temperature {} or σ {}",
-            params.propose_above_temperature, params.propose_above_success_std);
+            supervision.propose_above_temperature, supervision.propose_above_success_std);
         core = core.with_user_models(models.tables());
-    } else if params.supervised_autonomy {
+    } else if supervision.supervised_autonomy {
         tracing::info!(
             "supervised autonomy: proposing decisions above temperature {} (no user_model_file: \
              no σ rule)",
-            params.propose_above_temperature
+            supervision.propose_above_temperature
         );
     }
-    let mut files = SessionFiles::new(&params.sessions_dir);
+    let mut files = SessionFiles::new(&params.files.sessions_dir);
     let out = Outboxes {
         task: bus.publisher(TABLET_TASK)?,
         state: bus.publisher(GAME_STATE)?,
@@ -84,8 +85,8 @@ pub async fn run(
     robot.check(bus, Duration::from_secs(5)).await;
     // (due time, timer id) of the timers the core asked for.
     let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
-    if params.policy_startup_wait_s > 0.0 {
-        let wait = Duration::from_secs_f64(params.policy_startup_wait_s);
+    if params.timing.policy_startup_wait_s > 0.0 {
+        let wait = Duration::from_secs_f64(params.timing.policy_startup_wait_s);
         tokio::select! {
             biased;
             _ = bus.shutdown_signal() => return Ok(()),
@@ -102,8 +103,8 @@ pub async fn run(
             }
         }
     }
-    tracing::info!(sessions_dir = %params.sessions_dir, language = %params.language,
-        time_scale = params.time_scale, "game manager ready");
+    tracing::info!(sessions_dir = %params.files.sessions_dir, language = %params.lines.language,
+        time_scale = params.timing.time_scale, "game manager ready");
 
     let now = clock.now_nanos();
     let initial = match recovered_session(&mut core, &files, &params, now) {
@@ -190,7 +191,7 @@ fn recovered_session(
             ),
         }
     }
-    let (chosen, left) = recovery::choose(candidates, now, params.recovery_max_age_s);
+    let (chosen, left) = recovery::choose(candidates, now, params.reliability.recovery_max_age_s);
     for l in left {
         tracing::warn!("{l}");
     }

@@ -2,7 +2,7 @@
 //! encouraging and challenging feedback, the emotion words, "well done", "let's try again",
 //! goodbye, and the QTrobot face animations and gestures that go with them.
 
-use crate::params::GameManagerParams;
+use crate::params::LineParams;
 use sequence_game::{Emotion, Feedback};
 
 /// One thing the robot does: a line to say, and optionally a face and a gesture.
@@ -39,8 +39,8 @@ fn some(s: &str) -> Option<String> {
 }
 
 impl Utterances {
-    /// The lines of `params.language` (validated parameters: "en" or "de").
-    pub fn from_params(p: &GameManagerParams) -> Self {
+    /// The lines of `p.language` (validated parameters: "en" or "de").
+    pub fn from_params(p: &LineParams) -> Self {
         let de = p.language == "de";
         let pick = |en: &String, de_: &String| if de { de_.clone() } else { en.clone() };
         let pick_list =
@@ -157,8 +157,8 @@ mod tests {
 
     #[test]
     fn language_parameter_chooses_the_lines() {
-        let en = Utterances::from_params(&GameManagerParams::default());
-        let de = Utterances::from_params(&GameManagerParams {
+        let en = Utterances::from_params(&LineParams::default());
+        let de = Utterances::from_params(&LineParams {
             language: "de".into(),
             ..Default::default()
         });
@@ -176,7 +176,7 @@ mod tests {
         );
         assert!(en.feedback(Feedback::None, 0).is_none());
         let c = de.feedback(Feedback::Challenging, 3).expect("a line");
-        assert_eq!(c.speech, GameManagerParams::default().challenging_de[1]);
+        assert_eq!(c.speech, LineParams::default().challenging_de[1]);
         assert_eq!(c.gesture.as_deref(), Some("QT/challenge"));
     }
 }

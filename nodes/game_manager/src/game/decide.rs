@@ -38,7 +38,7 @@ impl GameManager {
             // one (results travel on a topic, requests on a service: either may come first).
             after_sequence: s.results.last().map_or(0, |r| r.sequence_index),
         };
-        let deadline_ns = now + (self.params.policy_deadline_s * 1e9).round() as i64;
+        let deadline_ns = now + (self.params.timing.policy_deadline_s * 1e9).round() as i64;
         self.current.request_id = Some(request_id);
         self.out.push(Output::Decide {
             request_id,
@@ -186,7 +186,7 @@ impl GameManager {
             }
         }
         self.current.request_id = None;
-        let s = self.params.policy_deadline_s;
+        let s = self.params.timing.policy_deadline_s;
         if self.paused() {
             // Nothing plays while held (a lost policy is the likely cause) or paused, so
             // waiting costs the child nothing: the policy is asked again when the session
@@ -215,7 +215,7 @@ impl GameManager {
                  heartbeat for {silent_s:.1} s: waiting for its next heartbeat (it is then \
                  asked again) or its loss (the session is then held) rather than playing the \
                  fallback",
-                self.params.policy_deadline_s
+                self.params.timing.policy_deadline_s
             ),
         );
         self.status =

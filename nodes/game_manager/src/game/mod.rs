@@ -173,14 +173,14 @@ struct CommandAnswer {
 impl GameManager {
     pub fn new(params: GameManagerParams) -> Result<Self, ParamError> {
         params.validate()?;
-        let robot = robot::RobotSteps::new(params.robot_backend()?);
-        let proposals = propose::ProposalDesk::new(&params);
+        let robot = robot::RobotSteps::new(params.robot.backend()?);
+        let proposals = propose::ProposalDesk::new(&params.supervision, params.timing.time_scale);
         let watched = HeartbeatWatch::with_timeout_s(
-            params.watched_nodes.iter().cloned(),
-            params.node_loss_timeout_s,
+            params.reliability.watched_nodes.iter().cloned(),
+            params.reliability.node_loss_timeout_s,
         );
         Ok(GameManager {
-            utterances: Utterances::from_params(&params),
+            utterances: Utterances::from_params(&params.lines),
             params,
             phase: Phase::Idle,
             session: None,
@@ -276,11 +276,11 @@ impl GameManager {
     }
 
     fn sequences(&self) -> u8 {
-        self.params.sequences_per_session as u8
+        self.params.session.sequences_per_session as u8
     }
 
     fn scaled_ns(&self, seconds: f64) -> i64 {
-        (seconds * self.params.time_scale * 1e9).round() as i64
+        (seconds * self.params.timing.time_scale * 1e9).round() as i64
     }
 
     fn set_timer(&mut self, timer: Timer, at_ns: i64) {

@@ -36,7 +36,7 @@ impl GameManager {
         let Some(plan) = self.current.plan.clone() else {
             return;
         };
-        let max_run = self.params.max_identical_in_a_row as usize;
+        let max_run = self.params.session.max_identical_in_a_row as usize;
         let index = self.session.as_ref().map_or(0, |s| s.index);
         if self.current.sequence.is_empty()
             && let Some(s) = self.session.as_mut()
@@ -62,7 +62,7 @@ impl GameManager {
         if let Some(act) = self.utterances.feedback(plan.feedback, line) {
             self.act(act);
         }
-        let at = now + self.scaled_ns(self.params.feedback_time_s);
+        let at = now + self.scaled_ns(self.params.timing.feedback_time_s);
         self.after_robot(Timer::FeedbackDone, at);
     }
 
@@ -78,7 +78,7 @@ impl GameManager {
         // Each word sits in the middle of its slot: the robot takes a breath first, and a
         // listener that follows GameState (DDS does not order messages across topics) has
         // SAYING_SEQUENCE before the first face.
-        let per = self.scaled_ns(self.params.speaking_time_per_emotion_s);
+        let per = self.scaled_ns(self.params.timing.speaking_time_per_emotion_s);
         self.set_timer(Timer::Word(0), now + per / 2);
     }
 
@@ -89,13 +89,13 @@ impl GameManager {
         let act = self.utterances.emotion_word(emotion);
         self.act(act);
         let n = self.current.sequence.len();
-        let per = self.scaled_ns(self.params.speaking_time_per_emotion_s);
+        let per = self.scaled_ns(self.params.timing.speaking_time_per_emotion_s);
         let t0 = self.current.words_started_ns;
         let slot_middle = |k: i64| t0 + per * k + per / 2;
         if i + 1 < n {
             self.after_robot(Timer::Word(i + 1), slot_middle(i as i64 + 1));
         } else {
-            let total = self.scaled_ns(self.params.speaking_time_s(n));
+            let total = self.scaled_ns(self.params.timing.speaking_time_s(n));
             self.after_robot(Timer::SequenceSaid, (t0 + total).max(slot_middle(i as i64)));
         }
     }
@@ -107,7 +107,7 @@ impl GameManager {
         let sequence_id = s.next_sequence_id;
         s.next_sequence_id += 1;
         let (session_id, index) = (s.id.clone(), s.index);
-        let timeout = self.scaled_ns(self.params.answer_timeout_s);
+        let timeout = self.scaled_ns(self.params.timing.answer_timeout_s);
         // Journalled first: a restarted node must not send this id again (tablets ignore a
         // task id they already saw).
         self.out.push(Output::Journal(Box::new(JournalEntry::Task {
@@ -143,11 +143,12 @@ impl GameManager {
             LogLevel::WARN,
             format!(
                 "sequence {index}: no answer within {} s: counted as wrong",
-                self.params.answer_timeout_s * self.params.time_scale
+                self.params.timing.answer_timeout_s * self.params.timing.time_scale
             ),
         );
         self.current.timed_out = true;
-        self.current.response_time = (self.params.answer_timeout_s * self.params.time_scale) as f32;
+        self.current.response_time =
+            (self.params.timing.answer_timeout_s * self.params.timing.time_scale) as f32;
         self.close_task(now);
     }
 
@@ -213,7 +214,8 @@ impl GameManager {
         if let Some(s) = self.session.as_mut() {
             s.closed_task = Some((self.current.sequence_id, timed_out));
         }
-        let ready_at = self.current.task_sent_ns + (self.params.engagement_wait_s * 1e9) as i64;
+        let ready_at =
+            self.current.task_sent_ns + (self.params.timing.engagement_wait_s * 1e9) as i64;
         if now >= ready_at {
             self.finalize(now, true);
         } else {
@@ -254,7 +256,7 @@ impl GameManager {
             engagement_period_start: Time::from_nanos(s.talk_start_ns),
             engagement_period_end: Time::from_nanos(c.task_sent_ns),
             response_time: c.response_time,
-            sequences_planned: self.params.sequences_per_session as u8,
+            sequences_planned: self.params.session.sequences_per_session as u8,
         };
         let record = SequenceRecord {
             result: result.clone(),
@@ -268,7 +270,7 @@ impl GameManager {
         s.state = State::after(plan.level, plan.feedback, scored.outcome);
         s.talk_start_ns = c.answered_ns;
         s.results.push(result.clone());
-        let last = s.index >= self.params.sequences_per_session as u8;
+        let last = s.index >= self.params.session.sequences_per_session as u8;
         let line = sequence_line(&result, &plan.reason);
         self.engagement.forget_before(c.answered_ns);
         self.out.push(Output::Record(Box::new(record)));
@@ -303,7 +305,7 @@ impl GameManager {
         } else {
             let act = self.utterances.reaction(correct, false);
             self.act(act);
-            let at = now + self.scaled_ns(self.params.reaction_time_s);
+            let at = now + self.scaled_ns(self.params.timing.reaction_time_s);
             self.after_robot(Timer::SpeechDone, at);
         }
         self.request_decision(now);

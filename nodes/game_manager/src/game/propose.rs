@@ -10,7 +10,7 @@
 //! what follows.
 
 use super::{GameManager, Phase, Plan, Timer};
-use crate::params::GameManagerParams;
+use crate::params::SupervisionParams;
 use crate::protocol::{LogLevel, Output};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
@@ -75,7 +75,8 @@ pub(super) struct ProposalDesk {
 }
 
 impl ProposalDesk {
-    pub(super) fn new(params: &GameManagerParams) -> Self {
+    /// A desk with the supervision parameters, its countdowns on the game's `time_scale`.
+    pub(super) fn new(params: &SupervisionParams, time_scale: f64) -> Self {
         ProposalDesk {
             enabled: params.supervised_autonomy,
             rule: ProposalRule {
@@ -83,7 +84,7 @@ impl ProposalDesk {
                 above_success_std: params.propose_above_success_std,
             },
             user_models: Vec::new(),
-            countdown_ns: (params.proposal_countdown_s * params.time_scale * 1e9).round() as i64,
+            countdown_ns: (params.proposal_countdown_s * time_scale * 1e9).round() as i64,
             open: None,
             counts: ProposalCounts::default(),
         }

@@ -83,8 +83,8 @@ impl GameManager {
     /// session draws what an uninterrupted run would have (and an interrupted sequence is
     /// said again with the same emotions).
     fn replayed_rng(&mut self, r: &RecoveredSession) -> SessionRng {
-        let mut rng = SessionRng::new(self.params.seed, &r.session_id);
-        let max_run = self.params.max_identical_in_a_row as usize;
+        let mut rng = SessionRng::new(self.params.session.seed, &r.session_id);
+        let max_run = self.params.session.max_identical_in_a_row as usize;
         for (k, record) in r.records.iter().enumerate() {
             let res = &record.result;
             if usize::from(res.sequence_index) != k + 1 {
@@ -115,7 +115,7 @@ impl GameManager {
                     format!(
                         "recovering {:?}: sequence {} in the file is not what seed {} draws \
                          (parameters changed?); the next sequences are drawn afresh",
-                        r.session_id, res.sequence_index, self.params.seed
+                        r.session_id, res.sequence_index, self.params.session.seed
                     ),
                 );
                 break;

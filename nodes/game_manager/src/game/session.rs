@@ -40,7 +40,7 @@ impl GameManager {
             user_id: c.user_id.clone(),
             cluster: c.user_model_cluster,
             last_command_id: c.command_id,
-            rng: SessionRng::new(self.params.seed, &c.session_id),
+            rng: SessionRng::new(self.params.session.seed, &c.session_id),
             state: State::START,
             index: 1,
             next_sequence_id: 1,
@@ -70,7 +70,7 @@ impl GameManager {
         );
         let intro = self.utterances.intro();
         self.act(intro);
-        let at = now + self.scaled_ns(self.params.intro_time_s);
+        let at = now + self.scaled_ns(self.params.timing.intro_time_s);
         self.after_robot(Timer::SpeechDone, at);
         self.request_decision(now);
     }
@@ -206,7 +206,7 @@ impl GameManager {
             }
         }
         let line = if running {
-            self.status = if self.params.auto_resume_after_node_loss {
+            self.status = if self.params.reliability.auto_resume_after_node_loss {
                 "session paused, robot silent; it resumes when the node is back".into()
             } else {
                 "session paused, robot silent; resume it when the node is back".into()
@@ -235,7 +235,7 @@ impl GameManager {
             return;
         };
         let therapist_paused = self.paused();
-        if !self.params.auto_resume_after_node_loss {
+        if !self.params.reliability.auto_resume_after_node_loss {
             if let Some(s) = self.session.as_mut()
                 && s.paused_since.is_none()
             {
@@ -351,7 +351,7 @@ impl GameManager {
             user_model_cluster: s.cluster,
             end,
             reason: reason.to_string(),
-            sequences_planned: self.params.sequences_per_session as u8,
+            sequences_planned: self.params.session.sequences_per_session as u8,
             sequences_played: s.results.len() as u8,
             interrupted_sequence: interrupted.then_some(s.index),
             correct: tally.correct as u32,
@@ -367,8 +367,8 @@ impl GameManager {
             policy_fallbacks: s.fallbacks,
             rejected_commands: s.rejected_commands,
             rejected_answers: s.rejected_answers,
-            seed: self.params.seed,
-            language: self.params.language.clone(),
+            seed: self.params.session.seed,
+            language: self.params.lines.language.clone(),
             started_ns: s.started_ns,
             ended_ns: now,
         };

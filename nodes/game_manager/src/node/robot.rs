@@ -93,7 +93,7 @@ impl Robot {
         params: &GameManagerParams,
         inputs: mpsc::Sender<Input>,
     ) -> anyhow::Result<Robot> {
-        let services = match params.robot_backend()? {
+        let services = match params.robot.backend()? {
             RobotBackend::Topics => {
                 return Ok(Robot::Topics {
                     speech: bus.publisher(ROBOT_SPEECH)?,
@@ -109,7 +109,7 @@ impl Robot {
             },
             RobotBackend::QtRobotRos2 => RobotServices::V3 {
                 say: bus.client(v3::SAY_TEXT)?,
-                cancel: match params.qtrobot_ros2_stop_namespace.as_str() {
+                cancel: match params.robot.qtrobot_ros2_stop_namespace.as_str() {
                     "" => bus.client(v3::TTS_CANCEL)?,
                     namespace => bus.client(under(namespace, v3::TTS_CANCEL))?,
                 },
@@ -119,8 +119,8 @@ impl Robot {
         };
         Ok(Robot::Services {
             services,
-            timeout: Duration::from_secs_f64(params.robot_call_timeout_s),
-            gesture_speed: params.robot_gesture_speed as f32,
+            timeout: Duration::from_secs_f64(params.robot.robot_call_timeout_s),
+            gesture_speed: params.robot.robot_gesture_speed as f32,
             calls: Vec::new(),
             inputs,
         })

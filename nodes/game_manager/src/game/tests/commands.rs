@@ -138,7 +138,7 @@ fn stop_says_goodbye_saves_the_session_and_ends_it() {
     h.run_until(T0 + 45 * S);
     assert_eq!(h.results().len(), 2);
     let out = h.feed(cmd(C::STOP, "s", 2));
-    let goodbye = GameManagerParams::default().goodbye_en;
+    let goodbye = GameManagerParams::default().lines.goodbye_en;
     assert!(out.contains(&Output::Say(goodbye)));
     let s = &h.summaries()[0];
     assert_eq!(

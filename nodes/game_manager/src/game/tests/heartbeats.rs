@@ -4,7 +4,7 @@
 //! recorded twice.
 
 use super::harness::*;
-use crate::params::GameManagerParams;
+use crate::params::{GameManagerParams, ReliabilityParams};
 use crate::protocol::{Input, Output};
 use crate::session_file::SessionEnd;
 use qt_therapy_msgs::{DecideActionRequest, GameState, TherapistCommand as C};
@@ -14,8 +14,11 @@ const CLASSIFIER: &str = "engagement_classifier";
 
 fn params(auto_resume: bool) -> GameManagerParams {
     GameManagerParams {
-        watched_nodes: vec![POLICY.into(), CLASSIFIER.into()],
-        auto_resume_after_node_loss: auto_resume,
+        reliability: ReliabilityParams {
+            watched_nodes: vec![POLICY.into(), CLASSIFIER.into()],
+            auto_resume_after_node_loss: auto_resume,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }

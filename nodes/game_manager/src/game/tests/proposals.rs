@@ -3,16 +3,19 @@
 //! it; sure decisions, and sessions without supervision, go straight through.
 
 use super::harness::*;
-use crate::params::GameManagerParams;
+use crate::params::{GameManagerParams, SupervisionParams};
 use crate::protocol::{Input, Output};
 use qt_therapy_msgs::{ActionProposal, GameState, TherapistCommand as C};
 use sequence_game::{Prediction, UserModelTable};
 
 fn supervised() -> GameManagerParams {
     GameManagerParams {
-        supervised_autonomy: true,
-        propose_above_temperature: 100.0,
-        proposal_countdown_s: 5.0,
+        supervision: SupervisionParams {
+            supervised_autonomy: true,
+            propose_above_temperature: 100.0,
+            proposal_countdown_s: 5.0,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
@@ -287,11 +290,9 @@ fn the_sigma_rule_reads_the_sessions_cluster_or_the_most_cautious() {
         )
     };
     let run = |cluster: i32| {
-        let params = GameManagerParams {
-            sequences_per_session: 2,
-            propose_above_success_std: 0.3,
-            ..supervised()
-        };
+        let mut params = supervised();
+        params.session.sequences_per_session = 2;
+        params.supervision.propose_above_success_std = 0.3;
         let mut h = Harness::new(params, rule_policy(), scripted_child(vec![]));
         h.gm = std::mem::replace(
             &mut h.gm,

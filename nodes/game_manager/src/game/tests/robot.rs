@@ -4,14 +4,17 @@
 //! therapist's resume says the interrupted sequence again from its start.
 
 use super::harness::*;
-use crate::params::GameManagerParams;
+use crate::params::{GameManagerParams, RobotParams};
 use crate::protocol::{Input, Output};
 use qt_therapy_msgs::{GameState, TherapistCommand as C};
 use sequence_game::Emotion;
 
 fn qtrobot() -> GameManagerParams {
     GameManagerParams {
-        robot_backend: "qtrobot".into(),
+        robot: RobotParams {
+            robot_backend: "qtrobot".into(),
+            ..Default::default()
+        },
         ..GameManagerParams::default()
     }
 }
@@ -127,7 +130,10 @@ fn a_step_the_robot_does_not_finish_pauses_the_session_and_resume_says_it_again(
 
 fn qtrobot_v3() -> GameManagerParams {
     GameManagerParams {
-        robot_backend: "qtrobot_ros2".into(),
+        robot: RobotParams {
+            robot_backend: "qtrobot_ros2".into(),
+            ..Default::default()
+        },
         ..GameManagerParams::default()
     }
 }
@@ -277,7 +283,7 @@ fn a_stop_says_goodbye_to_a_v3_once_the_call_under_way_returned_one_call_at_a_ti
     h.feed(cmd(C::STOP, "v", 2));
     h.run(600.0);
     let after: Vec<(i64, Output)> = calls(&h)[n..].to_vec();
-    let goodbye = h.gm.params().goodbye_en.clone();
+    let goodbye = h.gm.params().lines.goodbye_en.clone();
     assert_eq!(
         after,
         vec![
@@ -292,10 +298,8 @@ fn a_stop_says_goodbye_to_a_v3_once_the_call_under_way_returned_one_call_at_a_ti
 #[test]
 fn a_v3_cut_short_by_a_hold_is_no_failure_and_the_session_goes_on() {
     const POLICY: &str = "behaviour_policy";
-    let params = GameManagerParams {
-        watched_nodes: vec![POLICY.into()],
-        ..qtrobot_v3()
-    };
+    let mut params = qtrobot_v3();
+    params.reliability.watched_nodes = vec![POLICY.into()];
     let mut h = Harness::new(params, rule_policy(), scripted_child(vec![]));
     // The policy's process dies at 5 s (lost at 8.9 s) and is back at 12 s.
     h.heartbeats(POLICY, 20, T0, T0 + 5 * S);

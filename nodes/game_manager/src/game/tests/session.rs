@@ -23,10 +23,8 @@ fn scripted_session(params: GameManagerParams) -> Harness {
 
 #[test]
 fn a_shorter_session_says_its_length_in_every_result_and_state() {
-    let params = GameManagerParams {
-        sequences_per_session: 5,
-        ..GameManagerParams::default()
-    };
+    let mut params = GameManagerParams::default();
+    params.session.sequences_per_session = 5;
     let h = scripted_session(params);
     let results = h.results();
     assert_eq!(results.len(), 5);
@@ -145,7 +143,9 @@ fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
         })
         .collect();
     assert_eq!(
-        said.iter().filter(|s| p.encouraging_en.contains(s)).count(),
+        said.iter()
+            .filter(|s| p.lines.encouraging_en.contains(s))
+            .count(),
         3
     );
     assert_eq!(
@@ -154,8 +154,11 @@ fn a_whole_session_plays_ten_sequences_scores_and_records_them() {
             .count(),
         3
     );
-    assert_eq!(said[0], &p.intro_en);
-    assert!(said.last().is_some_and(|s| s.ends_with(&p.goodbye_en)));
+    assert_eq!(said[0], &p.lines.intro_en);
+    assert!(
+        said.last()
+            .is_some_and(|s| s.ends_with(&p.lines.goodbye_en))
+    );
 
     let summary = h.summaries();
     assert_eq!(summary.len(), 1);
@@ -186,10 +189,9 @@ fn same_seed_and_inputs_give_the_same_outputs() {
     let a = scripted_session(GameManagerParams::default());
     let b = scripted_session(GameManagerParams::default());
     assert_eq!(a.log, b.log);
-    let c = scripted_session(GameManagerParams {
-        seed: 43,
-        ..Default::default()
-    });
+    let mut seed_43 = GameManagerParams::default();
+    seed_43.session.seed = 43;
+    let c = scripted_session(seed_43);
     let seqs = |h: &Harness| {
         h.results()
             .into_iter()
@@ -201,10 +203,9 @@ fn same_seed_and_inputs_give_the_same_outputs() {
 
 #[test]
 fn time_scale_shortens_every_robot_timing_and_the_timeout() {
-    let h = scripted_session(GameManagerParams {
-        time_scale: 0.1,
-        ..Default::default()
-    });
+    let mut fast = GameManagerParams::default();
+    fast.timing.time_scale = 0.1;
+    let h = scripted_session(fast);
     let results = h.results();
     assert_eq!(results.len(), 10);
     assert!(
