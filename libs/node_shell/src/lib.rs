@@ -11,8 +11,8 @@
 //! One module per job: `options` (command line, parameter files), `environment` (domain,
 //! localhost-only), `qos`, `names`, `participant` (start-up), `publish`, `subscribe`,
 //! `services`, `tap`, `heartbeat`, `shutdown` (signals, clean stop), `security`, `dds_watch`,
-//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`,
-//! `instance_lock`.
+//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`; and
+//! `instance_lock`, the `instance_lock` library's, which offline tools use too.
 
 pub mod bus;
 pub mod clock;
@@ -22,7 +22,6 @@ pub mod drops;
 mod environment;
 pub mod heartbeat;
 pub mod in_process;
-pub mod instance_lock;
 pub mod logging;
 mod names;
 mod options;
@@ -39,6 +38,8 @@ pub mod tap;
 pub use bus::{Bus, CallError, Outbox, ServiceCall, ServiceClient};
 pub use clock::Clock;
 pub use environment::{domain_id_from_env, localhost_only_from_env};
+/// One process per state directory (`libs/instance_lock`), which the nodes' shells take.
+pub use instance_lock;
 pub use names::ros_name;
 pub use options::{INSTALLED_PARAMS_DIR, NoParameters, ShellOptions};
 pub use participant::NodeShell;

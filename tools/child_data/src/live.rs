@@ -1,8 +1,8 @@
 //! Whether a run of the suite is still live in a directory, so erase leaves a running session
 //! and a bag being recorded alone:
 //! - the game manager holds an exclusive `flock` on its sessions directory (the run
-//!   directory) while it runs (`libs/node_shell/src/instance_lock.rs`); a probe that cannot
-//!   take the lock finds it alive, and names its pid from `/proc/locks`;
+//!   directory) while it runs (`libs/instance_lock`); a probe that cannot take the lock finds
+//!   it alive, and names its pid from `/proc/locks` (`instance_lock::holder`);
 //! - between a game manager's crash and its respawn nobody holds the lock, but the launcher
 //!   (`out:=<run>`, `--log-dir <run>/logs`) and the recorder (`--output <run>/session.mcap`)
 //!   still name the directory in their command lines: any process whose arguments name the
@@ -45,7 +45,7 @@ pub fn lock_dir(dir: &Path) -> Result<Result<DirLock, LiveBy>, std::io::Error> {
     let file = File::open(dir)?;
     match file.try_lock() {
         Ok(()) => Ok(Ok(DirLock { _file: file })),
-        Err(TryLockError::WouldBlock) => Ok(Err(LiveBy::Lock(holder(dir)))),
+        Err(TryLockError::WouldBlock) => Ok(Err(LiveBy::Lock(instance_lock::holder(dir)))),
         Err(TryLockError::Error(e)) => Err(e),
     }
 }
@@ -56,26 +56,6 @@ pub fn lock_held(dir: &Path) -> Option<LiveBy> {
         Ok(Err(by)) => Some(by),
         _ => None,
     }
-}
-
-/// The process holding a `flock` on `dir`, from `/proc/locks`, as
-/// `libs/node_shell/src/instance_lock.rs` finds it. Lines read
-/// `1: FLOCK  ADVISORY  WRITE 1234 fd:01:5678 0 EOF`: the pid, then device and inode.
-fn holder(dir: &Path) -> Option<u32> {
-    use std::os::unix::fs::MetadataExt;
-    let meta = std::fs::metadata(dir).ok()?;
-    let dev = meta.dev();
-    let major = ((dev >> 8) & 0xfff) | ((dev >> 32) & !0xfff);
-    let minor = (dev & 0xff) | ((dev >> 12) & !0xff);
-    let file = format!("{major:02x}:{minor:02x}:{}", meta.ino());
-    let locks = std::fs::read_to_string("/proc/locks").ok()?;
-    locks.lines().find_map(|line| {
-        let fields: Vec<&str> = line.split_whitespace().collect();
-        let (kind, pid, locked) = (fields.get(1)?, fields.get(4)?, fields.get(5)?);
-        (*kind == "FLOCK" && *locked == file)
-            .then(|| pid.parse().ok())
-            .flatten()
-    })
 }
 
 /// The paths each running process names in its arguments.
@@ -227,9 +207,10 @@ mod tests {
     fn a_held_lock_names_its_holder_and_a_free_one_is_taken() {
         let _turn = FORK_OR_LOCK.lock().unwrap_or_else(|e| e.into_inner());
         let dir = tempfile::tempdir().expect("temp dir");
-        // As InstanceLock::acquire takes it (a flock per open file, so in-process works).
-        let held = File::open(dir.path()).expect("opens");
-        held.try_lock().expect("free");
+        // The game manager's lock (a flock per open file, so in-process works).
+        let held =
+            instance_lock::InstanceLock::acquire(dir.path(), "game_manager", "session files")
+                .expect("free");
         let by = lock_held(dir.path()).expect("held");
         assert_eq!(by, LiveBy::Lock(Some(std::process::id())));
         drop(held);

@@ -11,8 +11,8 @@
 //! - Session files, as `nodes/game_manager/src/session_file.rs` writes them (the session file
 //!   per sequence, the journal, the summary), filled from each bag's results, commands and
 //!   tasks. Log lines as `node_shell`'s tracing format writes the game manager's
-//!   (`nodes/game_manager/src/game/commands.rs`: "session … started for user …") and the
-//!   tablet bridge's (`nodes/tablet_bridge/src/therapist.rs`).
+//!   (`nodes/game_manager/src/game/session.rs`: "session … started for user …") and the
+//!   tablet bridge's (`nodes/tablet_bridge/src/bridge.rs`).
 //! - Reports by the `session_report` library, the CSV by `user_models` from the bags, the
 //!   model file by `user_models::fit` (one simulated user renamed to sim-child-1), the
 //!   Q-tables from `bags/q_tables` with their owner set.
@@ -766,10 +766,11 @@ fn erase_refuses_while_a_session_of_the_child_runs_and_takes_a_crashed_one() {
     // A's session without its summary: running, or cut off by a crash.
     std::fs::remove_file(f.run1().join(format!("{sa}.summary.json"))).expect("removes");
     let before = f.snapshot();
-    // The game manager's instance lock on its sessions directory, as
-    // libs/node_shell/src/instance_lock.rs takes it (a flock per open file).
-    let game_manager = std::fs::File::open(f.run1()).expect("opens");
-    game_manager.try_lock().expect("free");
+    // The game manager's instance lock on its sessions directory (a flock per open file, so
+    // this process holds it as another would).
+    let game_manager =
+        instance_lock::InstanceLock::acquire(&f.run1(), "game_manager", "session files")
+            .expect("free");
     let out = f.run("erase", A, &["--yes"]);
     assert_eq!(out.status.code(), Some(4), "{}", text(&out));
     let t = text(&out);

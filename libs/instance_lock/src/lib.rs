@@ -4,6 +4,9 @@
 //! refuses to start rather than overwrite the first one's files or recover its session. The
 //! lock is `flock` on the directory itself: no file is added to it, and the kernel drops the
 //! lock when the process dies, even by SIGKILL, so a respawned node takes it at once.
+//! [`holder`] names the process that holds it, for the node refused here and for the offline
+//! tools (`child_data`) that must leave a live run alone. No DDS: a tool links it without the
+//! node shell.
 
 use std::fs::{File, TryLockError};
 use std::path::{Path, PathBuf};
@@ -88,10 +91,10 @@ impl InstanceLock {
     }
 }
 
-/// The process holding a `flock` on `dir`, from `/proc/locks` (Linux), for the error message
-/// only. Lines read `1: FLOCK  ADVISORY  WRITE 1234 fd:01:5678 0 EOF`: the pid, then the
+/// The process holding a `flock` on `dir`, from `/proc/locks` (Linux), to name it in a
+/// message. Lines read `1: FLOCK  ADVISORY  WRITE 1234 fd:01:5678 0 EOF`: the pid, then the
 /// device (major:minor, hex) and the inode.
-fn holder(dir: &Path) -> Option<u32> {
+pub fn holder(dir: &Path) -> Option<u32> {
     use std::os::unix::fs::MetadataExt;
     let meta = std::fs::metadata(dir).ok()?;
     // glibc's major()/minor() of a dev_t.
