@@ -4,6 +4,7 @@
 use crate::reader::BagReader;
 use serde::Serialize;
 use std::fmt::Write as _;
+use time::OffsetDateTime;
 
 /// One topic's line of `bag info`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -163,26 +164,22 @@ fn secs(ns: u64) -> String {
     format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
 }
 
-/// `YYYY-MM-DD HH:MM:SS.nnnnnnnnn UTC` (days-to-civil after Howard Hinnant's algorithm).
+/// `YYYY-MM-DD HH:MM:SS.nnnnnnnnn UTC`.
 fn utc(ns: u64) -> String {
-    let total = ns / 1_000_000_000;
-    let (days, rem) = ((total / 86_400) as i64, total % 86_400);
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    format!(
-        "{year:04}-{month:02}-{day:02} {:02}:{:02}:{:02}.{:09} UTC",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60,
-        ns % 1_000_000_000
-    )
+    // Every u64 of nanoseconds (up to the year 2554) is a date `time` holds.
+    match OffsetDateTime::from_unix_timestamp_nanos(i128::from(ns)) {
+        Ok(t) => format!(
+            "{:04}-{:02}-{:02} {:02}:{:02}:{:02}.{:09} UTC",
+            t.year(),
+            u8::from(t.month()),
+            t.day(),
+            t.hour(),
+            t.minute(),
+            t.second(),
+            t.nanosecond()
+        ),
+        Err(_) => format!("{} s after the epoch", secs(ns)),
+    }
 }
 
 #[cfg(test)]
