@@ -8,13 +8,14 @@
 //! The last test replays the faces over real DDS into a real `engagement_classifier run`.
 
 use bag_file::BagReader;
-use behaviour_policy::messages::transition;
-use behaviour_policy::{BehaviourPolicyParams, PolicyCore, QTableFile};
+use behaviour_policy::BehaviourPolicyParams;
 use engagement_classifier::messages::{Sources, source_name};
 use engagement_classifier::{
     EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome,
 };
 use game_manager::{GameManager, GameManagerParams, Input, Output};
+use q_learning::messages::transition;
+use q_learning::{PolicyCore, QTableFile};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::{Header, StringMsg};
 use qt_therapy_msgs::topics::{
@@ -369,7 +370,7 @@ fn recorded_states_give_the_recorded_decisions_under_the_same_seed_and_q_tables(
             assert_eq!(got.temperature, d.temperature, "{context}");
             assert_eq!(got.explored, d.explored, "{context}");
             assert_eq!(
-                got.mode == behaviour_policy::Mode::Exploit,
+                got.mode == q_learning::Mode::Exploit,
                 d.exploitation_only,
                 "{context}"
             );

@@ -19,10 +19,11 @@
 //! bench/behaviour_policy/bench_policy.py.
 
 use bag_file::{BagReader, BagWriter, Compression, Stamp, WriterOptions};
-use behaviour_policy::messages::transition;
-use behaviour_policy::{BehaviourPolicyParams, PolicyCore, QTableFile};
+use behaviour_policy::BehaviourPolicyParams;
 use engagement_classifier::messages::Sources;
 use engagement_classifier::{EngagementClassifierParams, EngagementEstimator};
+use q_learning::messages::transition;
+use q_learning::{PolicyCore, QTableFile};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::topics::{DECISION, OPENFACE_FEATURES, SEQUENCE_RESULT};
 use qt_therapy_msgs::{Decision, OpenFaceFeatures, SequenceResult};

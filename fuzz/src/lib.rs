@@ -146,7 +146,7 @@ pub fn q_table_file(data: &[u8]) {
         return;
     };
     let path = Path::new("fuzz.json");
-    let Ok(file) = behaviour_policy::q_table_file::QTableFile::from_json_str(text, path) else {
+    let Ok(file) = q_learning::q_table_file::QTableFile::from_json_str(text, path) else {
         return;
     };
     let _ = file.owner.file_name();

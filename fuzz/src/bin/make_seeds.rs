@@ -6,8 +6,8 @@
 //! adds the repository's own files next to them.
 //!   make_seeds SEEDS_DIR
 
-use behaviour_policy::learning::QTable;
-use behaviour_policy::q_table_file::{QTableFile, QTableOwner};
+use q_learning::learning::QTable;
+use q_learning::q_table_file::{QTableFile, QTableOwner};
 use qt_therapy_msgs::std_msgs::{Header, StringMsg};
 use qt_therapy_msgs::*;
 use serde::Serialize;

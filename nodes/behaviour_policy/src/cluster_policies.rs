@@ -6,11 +6,11 @@
 //! decides for them and learns from their sessions; the cluster's table still learns from all
 //! of its users, so a new user starts from the group's experience.
 
-use crate::learning::{Learning, Mode, QTable};
-use crate::messages::{ResultError, decision_message, transition};
 use crate::persistent::{Opened, PersistentError, PersistentPolicy};
-use crate::policy_core::{PolicyError, Update};
-use crate::q_table_file::QTableOwner;
+use q_learning::learning::{Learning, Mode, QTable};
+use q_learning::messages::{ResultError, decision_message, transition};
+use q_learning::policy_core::{PolicyError, Update};
+use q_learning::q_table_file::QTableOwner;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{DecideActionRequest, SequenceResult};
 use std::collections::{BTreeMap, BTreeSet};
@@ -366,7 +366,7 @@ fn model_used(p: &PersistentPolicy) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::q_table_file::QTableFile;
+    use q_learning::q_table_file::QTableFile;
     use qt_therapy_msgs::BehaviourState;
     use sequence_game::State;
 

@@ -5,13 +5,13 @@
 //! run's (configuration, index), never from thread order, so any thread count gives the same
 //! curves.
 
-use crate::experiments::{EpochMetrics, Run, RunSpec, best_run, train_run, train_runs};
-use crate::learning::{Learning, Mode, QTable, Reward};
-use crate::simulation::{SessionSettings, SimulatedUser};
+use q_learning::learning::{Learning, Mode, QTable, Reward};
+use q_learning::simulation::{SessionSettings, SimulatedUser};
+use q_learning::training::{EpochMetrics, Run, RunSpec, best_run, train_run, train_runs};
 use rayon::prelude::*;
 use sequence_game::{SEQUENCES_PER_SESSION, UserModelTable};
 
-/// Runs interleaved on one thread (see `simulation::run_sessions`).
+/// Runs interleaved on one thread (see `q_learning::simulation::run_sessions`).
 const INTERLEAVE: usize = 2;
 
 pub(crate) fn splitmix64(mut z: u64) -> u64 {

@@ -6,12 +6,12 @@
 //! naming the file) while the others serve. All logic is in
 //! `ClusterPolicies`/`PersistentPolicy`/`PolicyCore`; this only moves messages.
 
-use crate::experiments::{EpochScheme, RunSpec, best_run, train_run};
 use crate::learn_first::LearnFirst;
-use crate::simulation::{SessionSettings, SimulatedUser};
-use crate::{BehaviourPolicyParams, ClusterPolicies, Learning, Mode, QTable};
+use crate::{BehaviourPolicyParams, ClusterPolicies};
 use anyhow::Context;
 use node_shell::{Bus, ServiceCall};
+use q_learning::training::Pretraining;
+use q_learning::{Learning, QTable};
 use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
 use qt_therapy_msgs::{DecideAction, DecideActionRequest, DecideActionResponse};
 use sequence_game::UserModelTable;
@@ -25,34 +25,25 @@ fn pretrain(
     (epochs, runs): (usize, usize),
     cluster: usize,
 ) -> Result<(QTable, String), String> {
-    let settings = SessionSettings {
-        learning,
-        mode: Mode::Explore,
-        state_lags_result: params.pretrain_state_lags_result,
-    };
-    let spec = RunSpec {
+    let pretraining = Pretraining {
         epochs,
-        sessions_per_epoch: 100,
-        scheme: EpochScheme::Blocks,
+        runs,
         state_lags_result: params.pretrain_state_lags_result,
     };
-    let user = SimulatedUser::new(model, &learning);
-    let all: Vec<_> = (0..runs)
-        .map(|r| {
-            let seed = params.seed() ^ ((cluster as u64) << 32) ^ r as u64;
-            train_run(&user, &settings, QTable::default(), &spec, seed)
+    let best = pretraining
+        .best_run(model, &learning, |r| {
+            params.seed() ^ ((cluster as u64) << 32) ^ r as u64
         })
-        .collect();
-    let best = best_run(&all).ok_or("pretraining made no run")?;
+        .ok_or("pretraining made no run")?;
     let provenance = format!(
         "pretrained by the node: best of {runs} runs x {epochs} epochs x 100 sessions (return \
          {:.3}), reward {}, state lag {}, against {}",
-        all[best].final_return,
+        best.final_return,
         learning.reward.name(),
         params.pretrain_state_lags_result,
         params.user_model_file
     );
-    Ok((all[best].q_table.clone(), provenance))
+    Ok((best.q_table, provenance))
 }
 
 /// Serves decisions with `params` (read from `params_file`, named in errors) until the node is

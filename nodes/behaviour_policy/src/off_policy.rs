@@ -4,17 +4,18 @@
 //! estimates with bootstrap intervals out, and the rules for when there are none to give
 //! ([`Limits`]: too few sessions, or a new policy that leaves the logged actions). For the
 //! validation, sessions are played against a user model and the new policy's exact value
-//! comes from `mdp`.
+//! comes from `q_learning::mdp`, as do the logged sessions and the judged Q-table's policy.
 
-use crate::learning::{
-    Learning, Mode, QTable, TemperatureSchedule, action_probabilities, allowed_at,
-};
-use crate::mdp::{ExactValue, StepPolicy, exact_value, simulate_sessions};
 use crate::stats::quantile;
+use q_learning::learning::{Learning, allowed_at};
+use q_learning::mdp::{
+    ExactValue, LoggedSession, LoggedStep, TargetPolicy, TargetPolicyError, exact_value,
+    simulate_sessions,
+};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sequence_game::{ACTION_COUNT, Action, Outcome, State, UserModelTable};
+use sequence_game::{ACTION_COUNT, Action, State, UserModelTable};
 use serde::Serialize;
 
 /// Why logged sessions cannot be evaluated.
@@ -45,92 +46,8 @@ pub enum OffPolicyError {
         action: Action,
         state: State,
     },
-    #[error("temperature {0} is not a positive number")]
-    Temperature(f64),
-    #[error("ε {0} is not in [0, 1]")]
-    Epsilon(f64),
-}
-
-/// One recorded decision and what followed it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LoggedStep {
-    /// The state the decision was taken in.
-    pub state: State,
-    /// 1-based sequence the decision set up.
-    pub step: u8,
-    pub action: Action,
-    /// The probability the logging policy gave `action` (the decision's `probabilities`).
-    pub logged_probability: f64,
-    pub outcome: Outcome,
-    /// Mean expected engagement E over the sequence.
-    pub engagement: f64,
-}
-
-/// One played session, its decisions in order.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LoggedSession {
-    pub session_id: String,
-    pub steps: Vec<LoggedStep>,
-}
-
-/// How the evaluated policy picks from its Q-table.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum TargetTemperature {
-    /// Greedy, ties uniform: the exploitation-only mode of real sessions.
-    Greedy,
-    /// Softmax at one temperature in every state.
-    Fixed(f64),
-    /// Softmax at each state's own temperature T_s from its visits.
-    PerState(TemperatureSchedule),
-    /// Greedy, but with probability ε an action drawn uniformly from the allowed ones: the
-    /// live policy's logged exploration (`exploration_epsilon`).
-    EpsilonGreedy(f64),
-}
-
-/// The policy being judged (or the one that logs, in simulation).
-#[derive(Debug, Clone, PartialEq)]
-pub struct TargetPolicy {
-    pub table: QTable,
-    pub temperature: TargetTemperature,
-}
-
-impl TargetPolicy {
-    pub fn new(table: QTable, temperature: TargetTemperature) -> Result<Self, OffPolicyError> {
-        if let TargetTemperature::Fixed(t) = temperature
-            && !(t.is_finite() && t > 0.0)
-        {
-            return Err(OffPolicyError::Temperature(t));
-        }
-        if let TargetTemperature::EpsilonGreedy(e) = temperature
-            && !(0.0..=1.0).contains(&e)
-        {
-            return Err(OffPolicyError::Epsilon(e));
-        }
-        Ok(TargetPolicy { table, temperature })
-    }
-
-    /// π(· | state) for the sequence `step`, exactly as the live policy computes it.
-    pub fn probabilities(&self, state: State, step: u8) -> [f64; ACTION_COUNT] {
-        let row = self.table.row(state);
-        let allowed = allowed_at(state, step);
-        match self.temperature {
-            TargetTemperature::Greedy => action_probabilities(row, allowed, Mode::Exploit, 1.0),
-            TargetTemperature::Fixed(t) => action_probabilities(row, allowed, Mode::Explore, t),
-            TargetTemperature::PerState(schedule) => {
-                let t = schedule.at(self.table.visits[state.index()]);
-                action_probabilities(row, allowed, Mode::Explore, t)
-            }
-            TargetTemperature::EpsilonGreedy(e) => {
-                action_probabilities(row, allowed, Mode::EpsilonGreedy(e), 1.0)
-            }
-        }
-    }
-}
-
-impl StepPolicy for TargetPolicy {
-    fn probabilities(&self, state: State, step: u8) -> [f64; ACTION_COUNT] {
-        TargetPolicy::probabilities(self, state, step)
-    }
+    #[error(transparent)]
+    Policy(#[from] TargetPolicyError),
 }
 
 /// A value with its bootstrap 95 % interval (percentiles 2.5 and 97.5).

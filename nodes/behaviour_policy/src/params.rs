@@ -1,8 +1,9 @@
 //! The node's parameters (`params/behaviour_policy.yaml`, ROS 2 form) and their checks. The
 //! defaults are the authors' constants, so the yaml, this struct and `Learning::default()`
-//! say the same thing (a test holds them together).
+//! say the same thing (a test holds them together); the learning constants are checked where
+//! every `Learning` is made (`q_learning::LearningConstants`).
 
-use crate::learning::{Learning, MAX_EPSILON, Mode, Reward, TemperatureSchedule};
+use q_learning::learning::{Learning, LearningConstants, MAX_EPSILON, Mode, Reward};
 
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -34,7 +35,7 @@ pub struct BehaviourPolicyParams {
 
 impl Default for BehaviourPolicyParams {
     fn default() -> Self {
-        let l = Learning::default();
+        let l = LearningConstants::default();
         BehaviourPolicyParams {
             user_model_file: "nodes/user_model/models/migrave_study_c2.json".into(),
             q_table_dir: "out/q_tables".into(),
@@ -49,9 +50,9 @@ impl Default for BehaviourPolicyParams {
             reward: Reward::RePlusBetaE.name().into(),
             alpha: l.alpha,
             gamma: l.gamma,
-            initial_temperature: l.temperature.initial,
-            min_temperature: l.temperature.minimum,
-            temperature_decay: l.temperature.decay_per_visit,
+            initial_temperature: l.initial_temperature,
+            min_temperature: l.min_temperature,
+            temperature_decay: l.temperature_decay,
             beta: l.beta,
             lambda: l.lambda,
             result_wait_s: 1.0,
@@ -85,19 +86,20 @@ impl BehaviourPolicyParams {
             key: "reward",
             reason: format!("{:?} is not RE, RE+bE or lE", self.reward),
         })?;
-        let learning = Learning {
+        let learning = LearningConstants {
             alpha: self.alpha,
             gamma: self.gamma,
-            temperature: TemperatureSchedule {
-                initial: self.initial_temperature,
-                minimum: self.min_temperature,
-                decay_per_visit: self.temperature_decay,
-            },
+            initial_temperature: self.initial_temperature,
+            min_temperature: self.min_temperature,
+            temperature_decay: self.temperature_decay,
             beta: self.beta,
             lambda: self.lambda,
-            reward,
-        };
-        validate_learning(&learning)?;
+        }
+        .learning(reward)
+        .map_err(|e| ParamError {
+            key: e.key,
+            reason: e.reason,
+        })?;
         // Checked with the constants, at start-up: how actions are picked is as much part of
         // what the node was asked to do.
         self.exploration()?;
@@ -169,38 +171,6 @@ impl BehaviourPolicyParams {
             }),
         }
     }
-}
-
-/// α in (0, 1], γ in [0, 1], temperatures positive and finite, β and λ finite.
-pub fn validate_learning(l: &Learning) -> Result<(), ParamError> {
-    check("alpha", l.alpha > 0.0 && l.alpha <= 1.0, || {
-        format!("{} is outside (0, 1]", l.alpha)
-    })?;
-    check("gamma", (0.0..=1.0).contains(&l.gamma), || {
-        format!("{} is outside [0, 1]", l.gamma)
-    })?;
-    let t = &l.temperature;
-    check(
-        "min_temperature",
-        t.minimum.is_finite() && t.minimum > 0.0,
-        || format!("{} must be positive", t.minimum),
-    )?;
-    check(
-        "initial_temperature",
-        t.initial.is_finite() && t.initial >= t.minimum,
-        || format!("{} must be at least min_temperature", t.initial),
-    )?;
-    check(
-        "temperature_decay",
-        t.decay_per_visit.is_finite() && t.decay_per_visit >= 0.0,
-        || format!("{} must be 0 or more", t.decay_per_visit),
-    )?;
-    check("beta", l.beta.is_finite(), || {
-        format!("{} is not finite", l.beta)
-    })?;
-    check("lambda", l.lambda.is_finite(), || {
-        format!("{} is not finite", l.lambda)
-    })
 }
 
 #[cfg(test)]

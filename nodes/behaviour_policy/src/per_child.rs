@@ -9,14 +9,14 @@
 //! (`simulation::SessionDraws`, common random numbers), and the policies are compared child
 //! by child (`stats::PairedComparison`).
 
-use crate::experiments::{EpochScheme, RunSpec, best_run, train_run};
 use crate::grid::splitmix64;
-use crate::learning::{Learning, Mode, QTable};
-use crate::mdp::{ExactValue, Objective, optimal_policy, play_session, session_metrics};
-use crate::simulation::{
+use crate::stats::{Interval, PairedComparison, mean, t_interval};
+use q_learning::learning::{Learning, Mode, QTable};
+use q_learning::mdp::{ExactValue, Objective, optimal_policy, play_session, session_metrics};
+use q_learning::simulation::{
     SessionDraws, SessionMetrics, SessionSettings, SimulatedRun, SimulatedUser, run_session_with,
 };
-use crate::stats::{Interval, PairedComparison, mean, t_interval};
+use q_learning::training::Pretraining;
 use rayon::prelude::*;
 use sequence_game::UserModelTable;
 use serde::Serialize;
@@ -129,36 +129,6 @@ pub(crate) fn seed_of(master: u64, path: &[u64]) -> u64 {
         .fold(splitmix64(master), |s, &i| splitmix64(s ^ i))
 }
 
-/// The node's pretraining against `model`: the best of `runs` softmax runs.
-fn pretrain(
-    model: &UserModelTable,
-    spec: &StudySpec,
-    settings: &SessionSettings,
-    seed: u64,
-) -> QTable {
-    let user = SimulatedUser::new(model, &spec.learning);
-    let run_spec = RunSpec {
-        epochs: spec.pretrain_epochs,
-        sessions_per_epoch: 100,
-        scheme: EpochScheme::Blocks,
-        state_lags_result: settings.state_lags_result,
-    };
-    let runs: Vec<_> = (0..spec.pretrain_runs)
-        .map(|r| {
-            train_run(
-                &user,
-                settings,
-                QTable::default(),
-                &run_spec,
-                seed_of(seed, &[r as u64]),
-            )
-        })
-        .collect();
-    best_run(&runs)
-        .map(|b| runs[b].q_table.clone())
-        .unwrap_or_default()
-}
-
 /// Per session of the run, the metrics of one child, policy and seed.
 pub type SessionRun = Vec<SessionMetrics>;
 
@@ -206,12 +176,17 @@ fn live_settings(spec: &StudySpec) -> SessionSettings {
 /// The child's cluster's table as the node pretrains it against the cluster's model (what
 /// the child meets as the cluster policy).
 pub fn cluster_table(case: &ChildCase, index: usize, spec: &StudySpec) -> QTable {
-    pretrain(
-        &case.cluster_model,
-        spec,
-        &live_settings(spec),
-        seed_of(spec.seed, &[index as u64, 0]),
-    )
+    let seed = seed_of(spec.seed, &[index as u64, 0]);
+    Pretraining {
+        epochs: spec.pretrain_epochs,
+        runs: spec.pretrain_runs,
+        state_lags_result: live_settings(spec).state_lags_result,
+    }
+    .best_run(&case.cluster_model, &spec.learning, |r| {
+        seed_of(seed, &[r as u64])
+    })
+    .map(|run| run.q_table)
+    .unwrap_or_default()
 }
 
 /// Plays `spec.sessions` sessions per policy and seed against the child's own model.

@@ -3,9 +3,9 @@
 //! is an error, never replaced. The file also remembers which sequences were learned from, so
 //! results sent again to a respawned policy are learned exactly once.
 
-use crate::learning::{Learning, Mode, QTable};
-use crate::policy_core::{Decision, PolicyCore, PolicyError, Transition, Update};
-use crate::q_table_file::{QTableError, QTableFile, QTableOwner};
+use q_learning::learning::{Learning, Mode, QTable};
+use q_learning::policy_core::{Decision, PolicyCore, PolicyError, Transition, Update};
+use q_learning::q_table_file::{QTableError, QTableFile, QTableOwner};
 use sequence_game::{Action, SEQUENCES_PER_SESSION, State};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -3,10 +3,10 @@
 //! and the per-child study's curves (per session, one line per policy, one panel per metric)
 //! and paired differences (per child, one panel per comparison).
 
-use crate::experiments::EpochMetrics;
 use crate::grid::Curve;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use q_learning::training::EpochMetrics;
 
 const COLOURS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),

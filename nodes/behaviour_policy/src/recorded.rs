@@ -4,8 +4,8 @@
 //! and why, can be told beside the estimate (leaving sessions out is itself a bias: the
 //! therapist stops or steers the sessions that go badly).
 
-use crate::messages::transition;
-use crate::off_policy::{LoggedSession, LoggedStep};
+use q_learning::mdp::{LoggedSession, LoggedStep};
+use q_learning::messages::transition;
 use qt_therapy_msgs::{Decision, SequenceResult};
 use sequence_game::{ACTION_COUNT, Outcome};
 use serde::Serialize;

@@ -1,8 +1,8 @@
 //! The experiments' outputs in words and numbers: every curve as CSV (one row per configuration
 //! and epoch), and the last-epoch table.
 
-use crate::experiments::EpochMetrics;
 use crate::grid::Curve;
+use q_learning::training::EpochMetrics;
 
 /// Every curve: config, cluster, reward, mode, transfer_from, epoch, then mean and std of each
 /// metric (score, engagement, ratio, return, v, explored).
@@ -99,7 +99,7 @@ pub fn last_epoch_table(curves: &[Curve]) -> String {
 mod tests {
     use super::*;
     use crate::grid::Config;
-    use crate::learning::{Mode, Reward};
+    use q_learning::learning::{Mode, Reward};
 
     fn curve(scores: &[f64]) -> Curve {
         let mean: Vec<EpochMetrics> = scores

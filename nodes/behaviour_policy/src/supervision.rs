@@ -14,11 +14,13 @@
 //! protects much per proposal; proposals at random, whatever the decision, show what
 //! proposing alone buys.
 
-use crate::learning::{Learning, QTable, allowed_at, greedy_set, nth_member};
-use crate::mdp::{Objective, OptimalPolicy, StepPolicy, child_answer, optimal_policy, transition};
 use crate::per_child::{ChildCase, StudySpec, cluster_table, seed_of, session_draws};
-use crate::simulation::SessionDraws;
 use crate::stats::{PairedComparison, mean};
+use q_learning::learning::{Learning, QTable, allowed_at, greedy_set, nth_member};
+use q_learning::mdp::{
+    Objective, OptimalPolicy, StepPolicy, child_answer, optimal_policy, transition,
+};
+use q_learning::simulation::SessionDraws;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;

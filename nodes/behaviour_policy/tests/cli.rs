@@ -397,13 +397,13 @@ fn evaluate_refuses_what_the_sample_bags_cannot_tell() {
 }
 
 /// Writes `sessions` into a bag the way the suite records them: the policy's Decision per
-/// sequence (`behaviour_policy::messages::decision_message`), the game manager's
+/// sequence (`q_learning::messages::decision_message`), the game manager's
 /// SequenceResult (`nodes/game_manager/src/game/outcome.rs`) and, for the sequences in
 /// `fallbacks`, a GameState with `policy_fallback` (`nodes/game_manager/src/game/mod.rs`,
 /// `publish_state`: set for every state published while the fallback's sequence plays).
 fn write_bag(
     file: &Path,
-    sessions: &[(behaviour_policy::off_policy::LoggedSession, Vec<[f64; 5]>)],
+    sessions: &[(q_learning::mdp::LoggedSession, Vec<[f64; 5]>)],
     fallbacks: &[(&str, u8)],
 ) {
     use bag_file::{BagWriter, WriterOptions};
@@ -467,11 +467,11 @@ fn write_bag(
 
 #[test]
 fn evaluate_estimates_from_enough_sessions_and_gives_no_interval_that_means_nothing() {
-    use behaviour_policy::mdp::simulate_sessions;
-    use behaviour_policy::off_policy::{TargetPolicy, TargetTemperature};
-    use behaviour_policy::reference_tables::per_level_reference_tables;
+    use q_learning::mdp::simulate_sessions;
+    use q_learning::mdp::{TargetPolicy, TargetTemperature};
+    use q_learning::reference_tables::per_level_reference_tables;
     let dir = tempfile::tempdir().expect("tempdir");
-    let table = behaviour_policy::QTableFile::load(Path::new("../../bags/q_tables/cluster_0.json"))
+    let table = q_learning::QTableFile::load(Path::new("../../bags/q_tables/cluster_0.json"))
         .expect("sample table")
         .table;
     // 60 sessions logged by a softmax (every action in the support), in two bags.

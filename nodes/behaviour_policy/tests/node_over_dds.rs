@@ -5,10 +5,9 @@
 //! in-process policy does. DDS multicasts, so the test runs itself again inside a private
 //! loopback-only network namespace (tests/loopback-netns), where it starts the node.
 
-use behaviour_policy::messages::transition;
-use behaviour_policy::{
-    BehaviourPolicyParams, Mode, PersistentPolicy, QTable, QTableFile, QTableOwner,
-};
+use behaviour_policy::{BehaviourPolicyParams, PersistentPolicy};
+use q_learning::messages::transition;
+use q_learning::{Mode, QTable, QTableFile, QTableOwner};
 use qt_therapy_msgs::{BehaviourState, DecideActionRequest, SequenceResult};
 use sequence_game::State;
 use std::collections::BTreeMap;

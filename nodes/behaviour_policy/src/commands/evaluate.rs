@@ -8,13 +8,12 @@
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
 use behaviour_policy::evaluation_plot::{evaluation_svg, validation_svg};
-use behaviour_policy::mdp::ExactValue;
 use behaviour_policy::off_policy::{
-    EstimatorCheck, Evaluation, Limits, ScoreCloseness, TargetPolicy, TargetTemperature,
-    Validation, evaluate, validate,
+    EstimatorCheck, Evaluation, Limits, ScoreCloseness, Validation, evaluate, validate,
 };
 use behaviour_policy::recorded::{LeftOut, LeftOutKind, LoggedSessions, logged_sessions};
-use behaviour_policy::{Learning, QTable, QTableFile, Reward};
+use q_learning::mdp::{ExactValue, TargetPolicy, TargetTemperature};
+use q_learning::{Learning, QTable, QTableFile, Reward};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -889,8 +888,8 @@ mod tests {
 
     #[test]
     fn no_interval_from_logs_no_session_of_which_the_new_policy_follows() {
-        use behaviour_policy::mdp::simulate_sessions;
-        use behaviour_policy::reference_tables::per_level_reference_tables;
+        use q_learning::mdp::simulate_sessions;
+        use q_learning::reference_tables::per_level_reference_tables;
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bags/q_tables");
         let table = |k: usize| {
             QTableFile::load(&root.join(format!("cluster_{k}.json")))

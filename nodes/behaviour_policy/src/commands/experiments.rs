@@ -4,11 +4,11 @@
 
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
-use behaviour_policy::experiments::{EpochScheme, RunSpec};
 use behaviour_policy::grid::{GridSpec, run_grid};
 use behaviour_policy::plot::{Figure, curves_svg};
 use behaviour_policy::report::{curves_csv, last_epoch_table};
-use behaviour_policy::{Reward, params::validate_learning};
+use q_learning::Reward;
+use q_learning::training::{EpochScheme, RunSpec};
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, clap::Args)]
@@ -77,7 +77,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         bail!("--epochs, --runs and --sessions-per-epoch must be at least 1");
     }
     let learning = a.learning.learning(Reward::Re)?;
-    validate_learning(&learning)?;
     let spec = GridSpec {
         runs: a.runs,
         seed: a.seed,

@@ -11,46 +11,42 @@ pub mod supervision;
 pub mod train;
 pub mod user_models;
 
-use behaviour_policy::params::validate_learning;
-use behaviour_policy::{Learning, Reward, TemperatureSchedule};
+use q_learning::{LearningConstants, Reward};
 
 /// Learning constants; defaults are the authors' (as `params/behaviour_policy.yaml`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct LearningArgs {
-    #[arg(long, default_value_t = Learning::default().alpha)]
+    #[arg(long, default_value_t = LearningConstants::default().alpha)]
     pub alpha: f64,
-    #[arg(long, default_value_t = Learning::default().gamma)]
+    #[arg(long, default_value_t = LearningConstants::default().gamma)]
     pub gamma: f64,
     /// T_s = max(min, initial - decay * visits_s).
-    #[arg(long, default_value_t = TemperatureSchedule::default().initial)]
+    #[arg(long, default_value_t = LearningConstants::default().initial_temperature)]
     pub initial_temperature: f64,
-    #[arg(long, default_value_t = TemperatureSchedule::default().minimum)]
+    #[arg(long, default_value_t = LearningConstants::default().min_temperature)]
     pub min_temperature: f64,
-    #[arg(long, default_value_t = TemperatureSchedule::default().decay_per_visit)]
+    #[arg(long, default_value_t = LearningConstants::default().temperature_decay)]
     pub temperature_decay: f64,
-    #[arg(long, default_value_t = Learning::default().beta)]
+    #[arg(long, default_value_t = LearningConstants::default().beta)]
     pub beta: f64,
-    #[arg(long, default_value_t = Learning::default().lambda)]
+    #[arg(long, default_value_t = LearningConstants::default().lambda)]
     pub lambda: f64,
 }
 
 impl LearningArgs {
-    pub fn learning(&self, reward: Reward) -> anyhow::Result<Learning> {
-        let l = Learning {
+    pub fn learning(&self, reward: Reward) -> anyhow::Result<q_learning::Learning> {
+        LearningConstants {
             alpha: self.alpha,
             gamma: self.gamma,
-            temperature: TemperatureSchedule {
-                initial: self.initial_temperature,
-                minimum: self.min_temperature,
-                decay_per_visit: self.temperature_decay,
-            },
+            initial_temperature: self.initial_temperature,
+            min_temperature: self.min_temperature,
+            temperature_decay: self.temperature_decay,
             beta: self.beta,
             lambda: self.lambda,
-            reward,
-        };
-        validate_learning(&l)
-            .map_err(|e| anyhow::anyhow!("--{}", e.to_string().replace('_', "-")))?;
-        Ok(l)
+        }
+        .learning(reward)
+        // The flag is the parameter's name with dashes.
+        .map_err(|e| anyhow::anyhow!("--{}: {}", e.key.replace('_', "-"), e.reason))
     }
 }
 

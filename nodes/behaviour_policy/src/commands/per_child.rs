@@ -8,12 +8,12 @@
 use super::child_study::ChildStudyArgs;
 use super::{LearningArgs, parse_reward};
 use anyhow::Context;
-use behaviour_policy::Reward;
 use behaviour_policy::per_child::{
     Arm, COMPARISONS, ChildResult, Window, cases, child_mean, mean_over_children, paired, run_study,
 };
 use behaviour_policy::plot::{per_child_paired_svg, per_child_svg};
 use behaviour_policy::stats::{Interval, PairedComparison, PairedSummary, Verdict, mean};
+use q_learning::Reward;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -405,8 +405,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use behaviour_policy::Learning;
     use behaviour_policy::per_child::StudySpec;
+    use q_learning::Learning;
     use user_models::simulate::{StudySpec as SyntheticStudy, simulate_study};
 
     #[test]

@@ -2,8 +2,8 @@
 //! from, and per state its Q-values, greedy action, visits and temperature.
 
 use anyhow::Context;
-use behaviour_policy::learning::{allowed_count, greedy_set, nth_member};
-use behaviour_policy::{QTableFile, TemperatureSchedule};
+use q_learning::learning::{allowed_count, greedy_set, nth_member};
+use q_learning::{QTableFile, TemperatureSchedule};
 use sequence_game::{Action, State};
 use std::path::PathBuf;
 

@@ -7,13 +7,13 @@
 
 use super::child_study::ChildStudyArgs;
 use anyhow::Context;
-use behaviour_policy::mdp::Objective;
 use behaviour_policy::stats::PairedComparison;
 use behaviour_policy::supervision::{
     ChildSupervision, Sigma, Supervised, Trigger, TriggerSummary, cases, matched_random, paired,
     run_study, summarise,
 };
-use behaviour_policy::{Learning, Reward};
+use q_learning::mdp::Objective;
+use q_learning::{Learning, Reward};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 

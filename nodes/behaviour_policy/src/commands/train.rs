@@ -5,10 +5,10 @@
 
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
-use behaviour_policy::experiments::{EpochScheme, Run, RunSpec, best_run, train_run};
-use behaviour_policy::simulation::{SessionSettings, SimulatedUser};
-use behaviour_policy::{Mode, QTable, QTableFile, QTableOwner, Reward};
 use node_shell::instance_lock::InstanceLock;
+use q_learning::simulation::{SessionSettings, SimulatedUser};
+use q_learning::training::{EpochScheme, Run, RunSpec, best_run, train_run};
+use q_learning::{Mode, QTable, QTableFile, QTableOwner, Reward};
 use rayon::prelude::*;
 use sequence_game::UserModelTable;
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //! hand-made per-level reference tables, always named as what they are.
 
 use anyhow::{Context, bail};
-use behaviour_policy::reference_tables::{PER_LEVEL_REFERENCE_NAME, per_level_reference_tables};
+use q_learning::reference_tables::{PER_LEVEL_REFERENCE_NAME, per_level_reference_tables};
 use sequence_game::UserModelTable;
 use std::path::Path;
 

@@ -1,9 +1,9 @@
 //! The grid: same seed, same curves whatever the thread count; seeds tied to configurations;
-//! the authors' epoch bookkeeping; transfer starting from the source's best run.
+//! transfer starting from the source's best run.
 
 use super::*;
-use crate::experiments::EpochScheme;
-use crate::reference_tables::per_level_reference_tables;
+use q_learning::reference_tables::per_level_reference_tables;
+use q_learning::training::EpochScheme;
 
 fn spec(runs: usize, epochs: usize) -> GridSpec {
     GridSpec {
@@ -74,32 +74,6 @@ fn a_configuration_gets_the_same_seeds_in_a_smaller_grid() {
         .find(|c| c.config.name == "M2 lE")
         .expect("in the full grid");
     assert_eq!(&only.curves[0], same);
-}
-
-#[test]
-fn authors_scheme_bins_like_their_scripts() {
-    let s = RunSpec {
-        epochs: 3,
-        sessions_per_epoch: 100,
-        scheme: EpochScheme::Authors,
-        state_lags_result: true,
-    };
-    assert_eq!(s.sessions(), 299);
-    let bins: Vec<usize> = [0, 1, 100, 101, 200, 201, 298]
-        .iter()
-        .map(|&i| s.epoch_of(i))
-        .collect();
-    assert_eq!(bins, [0, 1, 1, 2, 2, 3, 3]);
-    assert!(s.counts_visits(99) && s.counts_visits(199) && !s.counts_visits(0));
-    let b = RunSpec {
-        scheme: EpochScheme::Blocks,
-        ..s
-    };
-    assert_eq!(
-        (b.sessions(), b.epoch_of(199), b.epoch_of(200)),
-        (300, 1, 2)
-    );
-    assert!(b.counts_visits(0) && b.counts_visits(200) && !b.counts_visits(99));
 }
 
 #[test]

@@ -3,10 +3,11 @@
 //! support diagnostic, and bad logs refused by name.
 
 use super::*;
-use crate::QTableFile;
-use crate::learning::Reward;
-use crate::reference_tables::per_level_reference_tables;
-use sequence_game::{ACTION_COUNT, Level};
+use q_learning::learning::Reward;
+use q_learning::mdp::TargetTemperature;
+use q_learning::reference_tables::per_level_reference_tables;
+use q_learning::{QTable, QTableFile};
+use sequence_game::{ACTION_COUNT, Level, Outcome};
 
 fn table(cluster: usize) -> QTable {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -318,40 +319,6 @@ fn bad_logs_are_refused_by_name() {
         evaluate(&[bad(0.5, 0.0, 3)], None, &target, &l, 10, 0),
         Err(OffPolicyError::ActionNotAllowed { .. })
     ));
-    assert_eq!(
-        TargetPolicy::new(QTable::default(), TargetTemperature::Fixed(0.0)),
-        Err(OffPolicyError::Temperature(0.0))
-    );
-}
-
-#[test]
-fn the_policy_probabilities_are_the_live_policys() {
-    use crate::{Mode, PolicyCore};
-    let t = table(0);
-    let mut core = PolicyCore::new(t.clone(), learning(), Mode::Explore, 1, 0);
-    let policy =
-        TargetPolicy::new(t, TargetTemperature::PerState(learning().temperature)).expect("policy");
-    for state in State::all() {
-        for s in [1, 2, 10] {
-            let d = core.decide(state, s).expect("decides");
-            assert_eq!(d.probabilities, policy.probabilities(state, s));
-        }
-    }
-    // And the live policy's logged exploration, greedy ties included.
-    let mut t = table(0);
-    t.q[5] = [0.5, 0.5, 0.1, 0.5, -1.0];
-    let mut core = PolicyCore::new(t.clone(), learning(), Mode::EpsilonGreedy(0.1), 1, 0);
-    let policy = TargetPolicy::new(t, TargetTemperature::EpsilonGreedy(0.1)).expect("policy");
-    for state in State::all() {
-        for s in [1, 2, 10] {
-            let d = core.decide(state, s).expect("decides");
-            assert_eq!(d.probabilities, policy.probabilities(state, s));
-        }
-    }
-    assert_eq!(
-        TargetPolicy::new(QTable::default(), TargetTemperature::EpsilonGreedy(1.5)),
-        Err(OffPolicyError::Epsilon(1.5))
-    );
 }
 
 #[test]

@@ -11,7 +11,7 @@ fn spec() -> StudySpec {
             ..FitOptions::default()
         },
         learning: Learning {
-            reward: crate::Reward::RePlusBetaE,
+            reward: q_learning::Reward::RePlusBetaE,
             ..Learning::default()
         },
         pretrain_epochs: 20,
@@ -105,23 +105,13 @@ fn the_optimal_policy_bounds_what_the_others_can_expect() {
     let mut spread = 0.0f64;
     for (i, case) in cases.iter().take(4).enumerate() {
         let r = run_child(case, i, &s);
-        let live = SessionSettings {
-            learning: s.learning,
-            mode: Mode::Explore,
-            state_lags_result: false,
-        };
-        let cluster_table = pretrain(
-            &case.cluster_model,
-            &s,
-            &live,
-            seed_of(s.seed, &[i as u64, 0]),
-        );
-        let greedy = crate::off_policy::TargetPolicy::new(
+        let cluster_table = cluster_table(case, i, &s);
+        let greedy = q_learning::mdp::TargetPolicy::new(
             cluster_table,
-            crate::off_policy::TargetTemperature::Greedy,
+            q_learning::mdp::TargetTemperature::Greedy,
         )
         .expect("policy");
-        let cluster = crate::mdp::exact_value(&case.child_model, &greedy, &s.learning);
+        let cluster = q_learning::mdp::exact_value(&case.child_model, &greedy, &s.learning);
         assert!(cluster.discounted_return <= r.bounds.optimal.discounted_return + 1e-9);
         assert!(cluster.score <= r.bounds.best_score + 1e-9);
         // Played on the draws, the optimal policy's mean return is its exact value, within

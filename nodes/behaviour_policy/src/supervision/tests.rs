@@ -4,8 +4,8 @@
 //! repeat exactly.
 
 use super::*;
-use crate::mdp::play_session;
 use crate::per_child::{Arm, Metric, Window, run_child as per_child_run};
+use q_learning::mdp::play_session;
 use user_models::simulate::{StudySpec as SyntheticStudy, simulate_study};
 
 fn spec() -> StudySpec {
@@ -15,7 +15,7 @@ fn spec() -> StudySpec {
             ..FitOptions::default()
         },
         learning: Learning {
-            reward: crate::Reward::RePlusBetaE,
+            reward: q_learning::Reward::RePlusBetaE,
             ..Learning::default()
         },
         pretrain_epochs: 10,

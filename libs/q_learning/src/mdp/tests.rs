@@ -1,11 +1,11 @@
 //! The decision problem of a session: the optimal policy against known answers and against
 //! every other policy, its exact value against sampling, and sessions played here equal to
-//! the simulator's own on the same draws.
+//! the simulator's own on the same draws; a Q-table's policy with the live policy's
+//! probabilities.
 
 use super::*;
 use crate::QTableFile;
 use crate::learning::{Mode, QTable, Reward};
-use crate::off_policy::{TargetPolicy, TargetTemperature};
 use crate::reference_tables::per_level_reference_tables;
 use crate::simulation::{
     SessionDraws, SessionSettings, SimulatedRun, SimulatedUser, run_session_with,
@@ -157,4 +157,38 @@ fn a_session_played_here_is_the_simulators_on_the_same_draws() {
             assert!((here.discounted_return - simulated.discounted_return).abs() < 1e-12);
         }
     }
+}
+
+#[test]
+fn the_policy_probabilities_are_the_live_policys() {
+    use crate::PolicyCore;
+    let t = table(0);
+    let mut core = PolicyCore::new(t.clone(), learning(), Mode::Explore, 1, 0);
+    let policy =
+        TargetPolicy::new(t, TargetTemperature::PerState(learning().temperature)).expect("policy");
+    for state in State::all() {
+        for s in [1, 2, 10] {
+            let d = core.decide(state, s).expect("decides");
+            assert_eq!(d.probabilities, policy.probabilities(state, s));
+        }
+    }
+    // And the live policy's logged exploration, greedy ties included.
+    let mut t = table(0);
+    t.q[5] = [0.5, 0.5, 0.1, 0.5, -1.0];
+    let mut core = PolicyCore::new(t.clone(), learning(), Mode::EpsilonGreedy(0.1), 1, 0);
+    let policy = TargetPolicy::new(t, TargetTemperature::EpsilonGreedy(0.1)).expect("policy");
+    for state in State::all() {
+        for s in [1, 2, 10] {
+            let d = core.decide(state, s).expect("decides");
+            assert_eq!(d.probabilities, policy.probabilities(state, s));
+        }
+    }
+    assert_eq!(
+        TargetPolicy::new(QTable::default(), TargetTemperature::EpsilonGreedy(1.5)),
+        Err(TargetPolicyError::Epsilon(1.5))
+    );
+    assert_eq!(
+        TargetPolicy::new(QTable::default(), TargetTemperature::Fixed(0.0)),
+        Err(TargetPolicyError::Temperature(0.0))
+    );
 }

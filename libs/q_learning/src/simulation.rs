@@ -4,16 +4,18 @@
 //! update. The draws come from the run's own stream, or, for studies that compare policies on
 //! the same simulated child, from a session's fixed [`SessionDraws`] (common random numbers).
 
+mod softmax_cache;
+
 use crate::learning::{
     Learning, Mode, QTable, best, epsilon_greedy_pick, greedy_set, nth_member, sample_weights,
     td_target,
 };
-use crate::softmax_cache::SoftmaxCache;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sequence_game::{
     ACTION_COUNT, LEVEL_COUNT, ModelInput, Outcome, SEQUENCES_PER_SESSION, UserModelTable,
 };
+use softmax_cache::SoftmaxCache;
 
 const INPUTS: usize = sequence_game::user_model_table::SUCCESS_INPUTS;
 

@@ -1,12 +1,13 @@
 //! One training run of the evaluation: E epochs of 100 simulated sessions from a given Q-table,
 //! recording per epoch the mean score, engagement, ratio, return, V and share of exploratory
-//! steps of its sessions, with the authors' or plain epoch bookkeeping. `grid` runs many.
+//! steps of its sessions, with the authors' or plain epoch bookkeeping; the best of several
+//! runs. The node pretrains a cluster's table with it; the lab's studies run many.
 
-use crate::learning::QTable;
+use crate::learning::{Learning, Mode, QTable};
 use crate::simulation::{
     SessionMetrics, SessionSettings, SimulatedRun, SimulatedUser, run_session, run_sessions,
 };
-use sequence_game::SEQUENCES_PER_SESSION;
+use sequence_game::{SEQUENCES_PER_SESSION, UserModelTable};
 
 /// How sessions are grouped into epochs and which session counts visits for the temperature.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,7 +80,7 @@ impl EpochMetrics {
         ]
     }
 
-    pub(crate) fn from_values(v: [f64; 6]) -> Self {
+    pub fn from_values(v: [f64; 6]) -> Self {
         EpochMetrics {
             score: v[0],
             engagement: v[1],
@@ -200,4 +201,110 @@ pub fn train_runs<const N: usize>(
 /// The run with the highest mean return over its last epoch (the paper's transfer source).
 pub fn best_run(runs: &[Run]) -> Option<usize> {
     (0..runs.len()).max_by(|&a, &b| runs[a].final_return.total_cmp(&runs[b].final_return))
+}
+
+/// How the node pretrains a cluster's table that has no file: `runs` softmax runs of `epochs`
+/// epochs of 100 sessions from an empty table against the cluster's user model, the best kept.
+/// The per-child study pretrains the cluster policy its children meet the same way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pretraining {
+    pub epochs: usize,
+    pub runs: usize,
+    /// The simulated state's convention (`SessionSettings::state_lags_result`).
+    pub state_lags_result: bool,
+}
+
+impl Pretraining {
+    /// The best of the runs (by its last epoch's mean return); run r is seeded with
+    /// `seed(r)`. `None` when there are no runs.
+    pub fn best_run(
+        &self,
+        model: &UserModelTable,
+        learning: &Learning,
+        seed: impl Fn(usize) -> u64,
+    ) -> Option<Run> {
+        let settings = SessionSettings {
+            learning: *learning,
+            mode: Mode::Explore,
+            state_lags_result: self.state_lags_result,
+        };
+        let spec = RunSpec {
+            epochs: self.epochs,
+            sessions_per_epoch: 100,
+            scheme: EpochScheme::Blocks,
+            state_lags_result: self.state_lags_result,
+        };
+        let user = SimulatedUser::new(model, learning);
+        let mut runs: Vec<Run> = (0..self.runs)
+            .map(|r| train_run(&user, &settings, QTable::default(), &spec, seed(r)))
+            .collect();
+        let best = best_run(&runs)?;
+        Some(runs.swap_remove(best))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn authors_scheme_bins_like_their_scripts() {
+        let s = RunSpec {
+            epochs: 3,
+            sessions_per_epoch: 100,
+            scheme: EpochScheme::Authors,
+            state_lags_result: true,
+        };
+        assert_eq!(s.sessions(), 299);
+        let bins: Vec<usize> = [0, 1, 100, 101, 200, 201, 298]
+            .iter()
+            .map(|&i| s.epoch_of(i))
+            .collect();
+        assert_eq!(bins, [0, 1, 1, 2, 2, 3, 3]);
+        assert!(s.counts_visits(99) && s.counts_visits(199) && !s.counts_visits(0));
+        let b = RunSpec {
+            scheme: EpochScheme::Blocks,
+            ..s
+        };
+        assert_eq!(
+            (b.sessions(), b.epoch_of(199), b.epoch_of(200)),
+            (300, 1, 2)
+        );
+        assert!(b.counts_visits(0) && b.counts_visits(200) && !b.counts_visits(99));
+    }
+
+    #[test]
+    fn pretraining_keeps_the_best_of_its_seeded_runs() {
+        let model = &crate::reference_tables::per_level_reference_tables()[1];
+        let learning = Learning::default();
+        let p = Pretraining {
+            epochs: 2,
+            runs: 3,
+            state_lags_result: false,
+        };
+        let best = p
+            .best_run(model, &learning, |r| 40 + r as u64)
+            .expect("a run");
+        let settings = SessionSettings {
+            learning,
+            mode: Mode::Explore,
+            state_lags_result: false,
+        };
+        let spec = RunSpec {
+            epochs: 2,
+            sessions_per_epoch: 100,
+            scheme: EpochScheme::Blocks,
+            state_lags_result: false,
+        };
+        let user = SimulatedUser::new(model, &learning);
+        let runs: Vec<Run> = (0..3)
+            .map(|r| train_run(&user, &settings, QTable::default(), &spec, 40 + r))
+            .collect();
+        assert!(runs.iter().all(|r| r.final_return <= best.final_return));
+        assert!(runs.contains(&best));
+        assert_eq!(
+            Pretraining { runs: 0, ..p }.best_run(model, &learning, |r| r as u64),
+            None
+        );
+    }
 }

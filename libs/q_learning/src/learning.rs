@@ -127,6 +127,101 @@ impl Learning {
     }
 }
 
+/// The learning constants one by one, named as the node's parameters name them
+/// (`params/behaviour_policy.yaml`; the lab's flags are the same names with dashes): the one
+/// place a [`Learning`] is made from them and checked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LearningConstants {
+    pub alpha: f64,
+    pub gamma: f64,
+    pub initial_temperature: f64,
+    pub min_temperature: f64,
+    pub temperature_decay: f64,
+    pub beta: f64,
+    pub lambda: f64,
+}
+
+impl Default for LearningConstants {
+    /// The authors' ([`Learning::default`]).
+    fn default() -> Self {
+        let l = Learning::default();
+        LearningConstants {
+            alpha: l.alpha,
+            gamma: l.gamma,
+            initial_temperature: l.temperature.initial,
+            min_temperature: l.temperature.minimum,
+            temperature_decay: l.temperature.decay_per_visit,
+            beta: l.beta,
+            lambda: l.lambda,
+        }
+    }
+}
+
+/// A learning constant with a value Q-learning cannot use, named by its parameter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{key}: {reason}")]
+pub struct LearningError {
+    pub key: &'static str,
+    pub reason: String,
+}
+
+impl LearningConstants {
+    /// The constants with `reward`, checked: α in (0, 1], γ in [0, 1], temperatures positive
+    /// and finite (the initial one at least the minimum), the decay 0 or more, β and λ finite.
+    pub fn learning(&self, reward: Reward) -> Result<Learning, LearningError> {
+        let check = |key: &'static str, ok: bool, reason: &dyn Fn() -> String| {
+            if ok {
+                Ok(())
+            } else {
+                Err(LearningError {
+                    key,
+                    reason: reason(),
+                })
+            }
+        };
+        let c = self;
+        check("alpha", c.alpha > 0.0 && c.alpha <= 1.0, &|| {
+            format!("{} is outside (0, 1]", c.alpha)
+        })?;
+        check("gamma", (0.0..=1.0).contains(&c.gamma), &|| {
+            format!("{} is outside [0, 1]", c.gamma)
+        })?;
+        check(
+            "min_temperature",
+            c.min_temperature.is_finite() && c.min_temperature > 0.0,
+            &|| format!("{} must be positive", c.min_temperature),
+        )?;
+        check(
+            "initial_temperature",
+            c.initial_temperature.is_finite() && c.initial_temperature >= c.min_temperature,
+            &|| format!("{} must be at least min_temperature", c.initial_temperature),
+        )?;
+        check(
+            "temperature_decay",
+            c.temperature_decay.is_finite() && c.temperature_decay >= 0.0,
+            &|| format!("{} must be 0 or more", c.temperature_decay),
+        )?;
+        check("beta", c.beta.is_finite(), &|| {
+            format!("{} is not finite", c.beta)
+        })?;
+        check("lambda", c.lambda.is_finite(), &|| {
+            format!("{} is not finite", c.lambda)
+        })?;
+        Ok(Learning {
+            alpha: c.alpha,
+            gamma: c.gamma,
+            temperature: TemperatureSchedule {
+                initial: c.initial_temperature,
+                minimum: c.min_temperature,
+                decay_per_visit: c.temperature_decay,
+            },
+            beta: c.beta,
+            lambda: c.lambda,
+            reward,
+        })
+    }
+}
+
 /// Q-values and temperature visit counts of every state, rows in [`State::index`] order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct QTable {
@@ -411,6 +506,59 @@ mod tests {
         // ε = 0 is the greedy choice, ties shared.
         let p = action_probabilities(&row, 5, Mode::EpsilonGreedy(0.0), 1.0);
         assert_eq!(p, action_probabilities(&row, 5, Mode::Exploit, 1.0));
+    }
+
+    #[test]
+    fn the_constants_make_the_authors_learning_and_bad_ones_are_named() {
+        let c = LearningConstants::default();
+        assert_eq!(c.learning(Reward::Re), Ok(Learning::default()));
+        for (bad, key) in [
+            (
+                LearningConstants {
+                    alpha: f64::NAN,
+                    ..c
+                },
+                "alpha",
+            ),
+            (LearningConstants { gamma: 1.5, ..c }, "gamma"),
+            (
+                LearningConstants {
+                    min_temperature: 0.0,
+                    ..c
+                },
+                "min_temperature",
+            ),
+            (
+                LearningConstants {
+                    initial_temperature: 0.1,
+                    ..c
+                },
+                "initial_temperature",
+            ),
+            (
+                LearningConstants {
+                    temperature_decay: -1.0,
+                    ..c
+                },
+                "temperature_decay",
+            ),
+            (
+                LearningConstants {
+                    beta: f64::INFINITY,
+                    ..c
+                },
+                "beta",
+            ),
+            (
+                LearningConstants {
+                    lambda: f64::NAN,
+                    ..c
+                },
+                "lambda",
+            ),
+        ] {
+            assert_eq!(bad.learning(Reward::Re).expect_err(key).key, key);
+        }
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The live policy, sans-IO: given (state, step in the session) it returns an explained
 //! `Decision`; given an observed sequence result it applies Algorithm 1's update. Data in,
-//! data out: the node moves messages and saves files (see `persistent`).
+//! data out: the node moves messages and saves files (`nodes/behaviour_policy`, `persistent`).
 
 use crate::learning::{
     Learning, Mode, QTable, action_probabilities, allowed_at, best, epsilon_greedy_pick,

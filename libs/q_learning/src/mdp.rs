@@ -1,11 +1,17 @@
 //! A user model as the decision problem of one session of ten sequences (the live state
 //! convention: PS is the latest result): sessions played against it by any policy, a policy's
 //! exact value by backward induction, and the optimal policy, whose value is the most any
-//! policy (learning or not) can expect in a session against that model. Counterfactual
-//! evaluation's validation and the per-child study share it.
+//! policy (learning or not) can expect in a session against that model; played sessions as the
+//! live game logs them, and a Q-table's policy over a session. Counterfactual evaluation's
+//! validation and the per-child study share it.
+
+mod logged;
+mod table_policy;
+
+pub use logged::{LoggedSession, LoggedStep};
+pub use table_policy::{TargetPolicy, TargetPolicyError, TargetTemperature};
 
 use crate::learning::{Learning, allowed_at};
-use crate::off_policy::{LoggedSession, LoggedStep};
 use crate::simulation::{SessionMetrics, answers_right};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -40,7 +46,7 @@ fn draw(probabilities: &[f64; ACTION_COUNT], u: f64) -> usize {
 
 /// A simulated child's answer to a sequence, for a uniform `u`: right iff `u <= F^p(L, F, PS)`,
 /// engagement F^e(L, F, PS, O) (the means, as the policy's simulation uses them).
-pub(crate) fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) -> (Outcome, f64) {
+pub fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) -> (Outcome, f64) {
     let outcome = Outcome::from_correct(answers_right(u, model.success(input).mean));
     (
         outcome,
@@ -49,11 +55,7 @@ pub(crate) fn child_answer(model: &UserModelTable, input: ModelInput, u: f64) ->
 }
 
 /// The model input of the sequence `action` sets up from `state`, and the state after it.
-pub(crate) fn transition(
-    state: State,
-    action: Action,
-    outcome: Outcome,
-) -> Option<(ModelInput, State)> {
+pub fn transition(state: State, action: Action, outcome: Outcome) -> Option<(ModelInput, State)> {
     let (level, feedback) = action.apply(state)?;
     let input = ModelInput {
         level,
