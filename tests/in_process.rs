@@ -998,7 +998,7 @@ fn what_arrives_twice_is_taken_once() {
         "{:?}",
         fitted.warnings
     );
-    let evaluated = behaviour_policy::recorded::logged_sessions(&log.messages);
+    let evaluated = policy_lab::off_policy::recorded::logged_sessions(&log.messages);
     assert_eq!(
         evaluated.seen(),
         1,

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark of the behaviour policy's Q-learning (Algorithm 1) against a straightforward
-Python/NumPy implementation of the same algorithm, run in this script on the same slice.
+Python/NumPy implementation of the same algorithm, run in this script on the same slice. Ours
+is libs/q_learning, run by `policy_lab experiments`.
 
   python3 bench/behaviour_policy/bench_policy.py [--user-models FILE] [--python-runs 2]
 
@@ -28,13 +29,13 @@ import time
 import numpy as np
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-BIN = os.path.join(ROOT, "target", "release", "behaviour_policy")
+BIN = os.path.join(ROOT, "target", "release", "policy_lab")
 ALPHA, GAMMA, BETA, LAMBDA = 0.05, 0.95, 3.0, 3.0
 T0, T_MIN, T_DECAY = 300.0, 0.5, 5.0
 
 
 def experiments(args, out, threads=None):
-    """Runs `behaviour_policy experiments`; returns its timing JSON plus the process's CPU
+    """Runs `policy_lab experiments`; returns its timing JSON plus the process's CPU
     seconds (user + system, from rusage: this machine is shared, so wall time over-counts)."""
     timing = os.path.join(out, "timing.json")
     env = dict(os.environ)
@@ -115,7 +116,7 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--rust-runs", type=int, default=300)
     a = ap.parse_args()
-    subprocess.run(["cargo", "build", "--release", "-p", "behaviour_policy"], check=True, cwd=ROOT)
+    subprocess.run(["cargo", "build", "--release", "-p", "policy_lab"], check=True, cwd=ROOT)
     with tempfile.TemporaryDirectory() as out:
         # First run: tabulate the fitted user models once; later runs read the tables, so
         # loading (refitting the GPs) stays out of the CPU times.

@@ -1,6 +1,6 @@
 //! The node's messages to and from the policy core: a `SequenceResult` becomes the
 //! `Transition` it learns from, and a core `Decision` becomes the `Decision` message. The DDS
-//! node, the bag replays, the replay benchmark and counterfactual evaluation (`recorded`) share
+//! node, the bag replays, the replay benchmark and counterfactual evaluation (`policy_lab`) share
 //! them, so a replay checks the node's own conversion.
 
 use crate::learning::Mode;

@@ -1,18 +1,15 @@
-//! `behaviour_policy`: the paper's behaviour model from the command line.
-//!   behaviour_policy experiments --epochs 400 --runs 30 --output out/policy
-//!   behaviour_policy train --cluster 1 --transfer-from 0     (a Q-table file for the node)
-//!   behaviour_policy show-q-table out/q_tables/cluster_0.json
-//!   behaviour_policy evaluate --bags bags --q-table NEW.json  (judge a policy on old sessions)
-//!   behaviour_policy per-child                               (leave-one-child-out adaptation)
-//!   behaviour_policy supervision                             (supervised autonomy's rules, measured)
+//! `behaviour_policy`: the decision node of the paper's behaviour model.
 //!   behaviour_policy run                                     (the DDS decision node)
+//!   behaviour_policy show-q-table out/q_tables/cluster_0.json (what a cluster's table holds)
+//! The studies, their figures and training Q-table files are `policy_lab`'s
+//! (`tools/policy_lab`).
 
 mod commands;
 
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(about = "Behaviour policy: Q-learning experiments, Q-tables, and the decision node")]
+#[command(about = "Behaviour policy: the decision node, and its Q-table files in words")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -20,47 +17,23 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Every user model x reward (and both transfers) in simulation: CSV and Figs. 4, 5.
-    Experiments(commands::experiments::Args),
-    /// Pretrain (or transfer) one cluster's Q-table in simulation and write its file.
-    Train(commands::train::Args),
-    /// Print a Q-table file: per state its Q-values, greedy action, visits, temperature.
-    ShowQTable(commands::show_q_table::Args),
-    /// Judge a Q-table's policy on recorded sessions (off-policy importance sampling), or
-    /// refuse where the sessions cannot tell.
-    Evaluate(commands::evaluate::Args),
-    /// Check `evaluate`'s estimators where the truth is known: sessions logged against a user
-    /// model, the judged policy's exact value beside the estimates, over many seeds.
-    EvaluateInSimulation(commands::evaluate::SimulationArgs),
-    /// Per-child adaptation: leave one study child out, compare the cluster's policy, a
-    /// per-user table started from it, a table learned from scratch on the child and the
-    /// optimal policy for the child's model, on the same draws, child by child.
-    PerChild(commands::per_child::Args),
-    /// Supervised autonomy's proposal rules on the study's children, leave one child out:
-    /// proposals per session and the score a therapist who knows the child protects, against
-    /// the policy alone and proposals at random at the same rate, paired by child.
-    Supervision(commands::supervision::Args),
     /// Run the decision node over DDS.
     Run {
         #[command(flatten)]
         shell: node_shell::ShellOptions,
     },
+    /// Print a Q-table file: per state its Q-values, greedy action, visits, temperature.
+    ShowQTable(commands::show_q_table::Args),
 }
 
 fn main() -> anyhow::Result<()> {
     // packaging/deb/build.sh asks each program for its manual pages.
     man_pages::write_if_asked::<Cli>();
     match Cli::parse().command {
-        Command::Experiments(a) => commands::experiments::run(a),
-        Command::Train(a) => commands::train::run(a),
-        Command::ShowQTable(a) => commands::show_q_table::run(a),
-        Command::Evaluate(a) => commands::evaluate::run(a),
-        Command::EvaluateInSimulation(a) => commands::evaluate::run_in_simulation(a),
-        Command::PerChild(a) => commands::per_child::run(a),
-        Command::Supervision(a) => commands::supervision::run(a),
         Command::Run { shell } => tokio::runtime::Builder::new_multi_thread()
             .enable_all()
             .build()?
             .block_on(commands::run::run(shell)),
+        Command::ShowQTable(a) => commands::show_q_table::run(a),
     }
 }

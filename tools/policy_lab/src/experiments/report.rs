@@ -1,7 +1,7 @@
 //! The experiments' outputs in words and numbers: every curve as CSV (one row per configuration
 //! and epoch), and the last-epoch table.
 
-use crate::grid::Curve;
+use crate::experiments::grid::Curve;
 use q_learning::training::EpochMetrics;
 
 /// Every curve: config, cluster, reward, mode, transfer_from, epoch, then mean and std of each
@@ -98,7 +98,7 @@ pub fn last_epoch_table(curves: &[Curve]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::Config;
+    use crate::experiments::grid::Config;
     use q_learning::learning::{Mode, Reward};
 
     fn curve(scores: &[f64]) -> Curve {

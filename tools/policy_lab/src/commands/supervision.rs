@@ -1,5 +1,5 @@
-//! `behaviour_policy supervision`: supervised autonomy measured on the study's children
-//! (`behaviour_policy::supervision`): for each proposal rule, how many decisions a session
+//! `policy_lab supervision`: supervised autonomy measured on the study's children
+//! (`policy_lab::child_study::supervision`): for each proposal rule, how many decisions a session
 //! sends to the therapist and how much score a therapist who knows the child protects by
 //! answering them, leave one child out. Prints one row per rule; writes supervision.json (each
 //! rule's summary) and supervision.csv (per child and rule: proposals, replaced and score per
@@ -7,11 +7,11 @@
 
 use super::child_study::ChildStudyArgs;
 use anyhow::Context;
-use behaviour_policy::stats::PairedComparison;
-use behaviour_policy::supervision::{
+use policy_lab::child_study::supervision::{
     ChildSupervision, Sigma, Supervised, Trigger, TriggerSummary, cases, matched_random, paired,
     run_study, summarise,
 };
+use policy_lab::stats::PairedComparison;
 use q_learning::mdp::Objective;
 use q_learning::{Learning, Reward};
 use std::fmt::Write as _;

@@ -9,7 +9,7 @@
 //! (`simulation::SessionDraws`, common random numbers), and the policies are compared child
 //! by child (`stats::PairedComparison`).
 
-use crate::grid::splitmix64;
+use crate::experiments::grid::splitmix64;
 use crate::stats::{Interval, PairedComparison, mean, t_interval};
 use q_learning::learning::{Learning, Mode, QTable};
 use q_learning::mdp::{ExactValue, Objective, optimal_policy, play_session, session_metrics};

@@ -1,5 +1,5 @@
-//! `behaviour_policy per-child`: per-child adaptation measured on the study's participants,
-//! leave one child out at a time (`behaviour_policy::per_child`): the cluster's policy, a
+//! `policy_lab per-child`: per-child adaptation measured on the study's participants,
+//! leave one child out at a time (`policy_lab::child_study::per_child`): the cluster's policy, a
 //! per-user table started from it, a table learned on the child from scratch, and the optimal
 //! policy for the child's own model, each on the same simulated sessions, compared child by
 //! child. Prints the policies' means, the paired comparisons and the per-child table; writes
@@ -8,11 +8,11 @@
 use super::child_study::ChildStudyArgs;
 use super::{LearningArgs, parse_reward};
 use anyhow::Context;
-use behaviour_policy::per_child::{
+use policy_lab::child_study::per_child::{
     Arm, COMPARISONS, ChildResult, Window, cases, child_mean, mean_over_children, paired, run_study,
 };
-use behaviour_policy::plot::{per_child_paired_svg, per_child_svg};
-use behaviour_policy::stats::{Interval, PairedComparison, PairedSummary, Verdict, mean};
+use policy_lab::plots::{per_child_paired_svg, per_child_svg};
+use policy_lab::stats::{Interval, PairedComparison, PairedSummary, Verdict, mean};
 use q_learning::Reward;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -405,7 +405,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use behaviour_policy::per_child::StudySpec;
+    use policy_lab::child_study::per_child::StudySpec;
     use q_learning::Learning;
     use user_models::simulate::{StudySpec as SyntheticStudy, simulate_study};
 

@@ -1,12 +1,12 @@
-//! The `behaviour_policy` binary end to end: experiments write their curves, tables and
-//! figures (and the tables they write reproduce the same curves); train and show-q-table
-//! round-trip a Q-table file; bad input is refused by name and nothing is overwritten.
+//! The `policy_lab` binary end to end: experiments write their curves, tables and figures
+//! (and the tables they write reproduce the same curves); train writes a Q-table file the node
+//! reads; bad input is refused by name and nothing is overwritten.
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 fn bin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_behaviour_policy"))
+    Command::new(env!("CARGO_BIN_EXE_policy_lab"))
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
@@ -76,7 +76,7 @@ fn experiments_write_curves_tables_and_figures_that_reproduce() {
 }
 
 #[test]
-fn train_writes_a_q_table_that_show_q_table_reads() {
+fn train_writes_a_q_table_file_the_node_reads() {
     let dir = tempfile::tempdir().expect("tempdir");
     let file = dir.path().join("cluster_1.json");
     let shown = ok(&[
@@ -94,9 +94,17 @@ fn train_writes_a_q_table_that_show_q_table_reads() {
         path(&file),
     ]);
     assert!(shown.contains("transferred from cluster 0"), "{shown}");
-    let table = ok(&["show-q-table", path(&file)]);
-    assert!(table.contains("cluster 1"), "{table}");
-    assert!(table.contains("(L=0, F=0, PS=+0)"), "{table}");
+    let table = q_learning::QTableFile::load(&file).expect("a Q-table file");
+    assert_eq!(table.owner, q_learning::QTableOwner::Cluster(1));
+    assert!(
+        table
+            .provenance
+            .starts_with("policy_lab train: transferred from cluster 0"),
+        "{}",
+        table.provenance
+    );
+    assert_eq!(table.updates, 0);
+    assert!(table.table != q_learning::QTable::default(), "trained");
     // An existing table (maybe taught by real sessions) is not replaced without --force.
     let before = std::fs::read(&file).expect("read");
     let retrain = [
@@ -111,12 +119,9 @@ fn train_writes_a_q_table_that_show_q_table_reads() {
     assert_eq!(std::fs::read(&file).expect("read"), before);
     // Not even with --force while a node runs on that directory (its lock, held here by this
     // process): the node would overwrite the new table with its own.
-    let _running_node = node_shell::instance_lock::InstanceLock::acquire(
-        dir.path(),
-        "behaviour_policy",
-        "Q-tables",
-    )
-    .expect("free");
+    let _running_node =
+        instance_lock::InstanceLock::acquire(dir.path(), "behaviour_policy", "Q-tables")
+            .expect("free");
     fails(
         &[&retrain[..], &["--force"]].concat(),
         &format!(
@@ -152,13 +157,6 @@ fn bad_input_is_refused_by_name() {
         ],
         "unknown user model cluster 2",
     );
-    let corrupt = dir.path().join("cluster_0.json");
-    std::fs::write(
-        &corrupt,
-        "{\"format\": \"qt_therapy q_table\", \"version\": 1, \"own",
-    )
-    .expect("write");
-    fails(&["show-q-table", path(&corrupt)], "cluster_0.json");
     let wrong = dir.path().join("models.json");
     std::fs::write(
         &wrong,
@@ -191,8 +189,8 @@ fn bad_input_is_refused_by_name() {
 
 #[test]
 fn the_fitted_user_models_in_the_repository_load() {
-    let models =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../user_model/models/migrave_study_c2.json");
+    let models = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../nodes/user_model/models/migrave_study_c2.json");
     if !models.exists() {
         println!("skipping: {} not found", models.display());
         return;

@@ -1,11 +1,11 @@
-//! `behaviour_policy train`: pretrains one cluster's Q-table in simulation and writes it as a
+//! `policy_lab train`: pretrains one cluster's Q-table in simulation and writes it as a
 //! Q-table file for the node: R runs, the best by mean return over its last epoch is kept.
 //! With `--transfer-from k`, cluster k's best RE + βE policy initialises the table, which is
 //! then trained exploitation-only (the paper's policy transfer).
 
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
-use node_shell::instance_lock::InstanceLock;
+use instance_lock::InstanceLock;
 use q_learning::simulation::{SessionSettings, SimulatedUser};
 use q_learning::training::{EpochScheme, Run, RunSpec, best_run, train_run};
 use q_learning::{Mode, QTable, QTableFile, QTableOwner, Reward};
@@ -96,7 +96,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         None => PathBuf::from("out/q_tables").join(owner.file_name()?),
     };
     // A node running on that directory would overwrite the table with its own at its next
-    // update: refuse before training rather than lose the result.
+    // update: refuse before training rather than lose the result. The lock is the node's,
+    // taken under its name, so the error names the node that holds it.
     let dir = output
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -153,7 +154,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let best = best_run(&runs).context("no run")?;
     let last = runs[best].epochs.last().copied().unwrap_or_default();
     let provenance = format!(
-        "behaviour_policy train: {how}{} x {} epochs x {} sessions, reward {}, {:?}, state lag {}, \
+        "policy_lab train: {how}{} x {} epochs x {} sessions, reward {}, {:?}, state lag {}, \
          seed {}, best run {best} (last epoch: score {:.2}, engagement {:.3}, return {:.3}); {source}",
         a.runs,
         a.epochs,

@@ -4,7 +4,7 @@
 //! way and refuse the same bad values.
 
 use anyhow::{Context, bail};
-use behaviour_policy::per_child::StudySpec;
+use policy_lab::child_study::per_child::StudySpec;
 use q_learning::Learning;
 use std::path::PathBuf;
 use user_models::data::InteractionRecord;

@@ -4,7 +4,10 @@
 //! estimates with bootstrap intervals out, and the rules for when there are none to give
 //! ([`Limits`]: too few sessions, or a new policy that leaves the logged actions). For the
 //! validation, sessions are played against a user model and the new policy's exact value
-//! comes from `q_learning::mdp`, as do the logged sessions and the judged Q-table's policy.
+//! comes from `q_learning::mdp`, as do the logged sessions and the judged Q-table's policy;
+//! recorded sessions are read from the bags by `recorded`.
+
+pub mod recorded;
 
 use crate::stats::quantile;
 use q_learning::learning::{Learning, allowed_at};

@@ -14,7 +14,7 @@
 //! protects much per proposal; proposals at random, whatever the decision, show what
 //! proposing alone buys.
 
-use crate::per_child::{ChildCase, StudySpec, cluster_table, seed_of, session_draws};
+use crate::child_study::per_child::{ChildCase, StudySpec, cluster_table, seed_of, session_draws};
 use crate::stats::{PairedComparison, mean};
 use q_learning::learning::{Learning, QTable, allowed_at, greedy_set, nth_member};
 use q_learning::mdp::{
@@ -125,7 +125,7 @@ pub fn cases(
     records: &[InteractionRecord],
     fit: &FitOptions,
 ) -> Result<Vec<SupervisionCase>, UserModelError> {
-    let children = crate::per_child::cases(records, fit)?;
+    let children = crate::child_study::per_child::cases(records, fit)?;
     let users = user_models::fit::user_vectors(records)?;
     let fitted = FitOptions {
         noise_model: NoiseModel::FittedPerSequence,

@@ -3,7 +3,7 @@
 //! validation in simulation, every seed's interval against the exact value.
 
 use crate::off_policy::{Estimate, Estimates, Evaluation, Validation};
-use crate::plot::panels_svg;
+use crate::plots::panels_svg;
 use plotters::prelude::*;
 
 const LOGGED: RGBColor = RGBColor(90, 90, 90);

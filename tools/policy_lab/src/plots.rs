@@ -1,9 +1,12 @@
 //! The paper's Figs. 4 and 5 as SVG: per epoch the mean ± std band across runs, one line per
 //! configuration (three rewards and the transfer into that model), one panel per user model;
 //! and the per-child study's curves (per session, one line per policy, one panel per metric)
-//! and paired differences (per child, one panel per comparison).
+//! and paired differences (per child, one panel per comparison). Counterfactual evaluation's
+//! figures are in `evaluation`.
 
-use crate::grid::Curve;
+pub mod evaluation;
+
+use crate::experiments::grid::Curve;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use q_learning::training::EpochMetrics;
@@ -185,10 +188,10 @@ pub fn curves_svg(curves: &[Curve], figure: Figure, subtitle: &str) -> Result<St
 /// The per-child study: per session of the run, the mean over children of each policy with
 /// its 95 % t interval over children (each child: the mean over seeds), one panel per metric.
 pub fn per_child_svg(
-    results: &[crate::per_child::ChildResult],
+    results: &[crate::child_study::per_child::ChildResult],
     subtitle: &str,
 ) -> Result<String, String> {
-    use crate::per_child::{Arm, Metric, curve};
+    use crate::child_study::per_child::{Arm, Metric, curve};
     panels_svg((1500, 480), subtitle, Metric::ALL.len(), |i, panel| {
         let metric = Metric::ALL[i];
         // Per policy, (x, mean, half-width of the interval).

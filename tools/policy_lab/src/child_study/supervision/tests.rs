@@ -4,7 +4,7 @@
 //! repeat exactly.
 
 use super::*;
-use crate::per_child::{Arm, Metric, Window, run_child as per_child_run};
+use crate::child_study::per_child::{Arm, Metric, Window, run_child as per_child_run};
 use q_learning::mdp::play_session;
 use user_models::simulate::{StudySpec as SyntheticStudy, simulate_study};
 
@@ -88,7 +88,7 @@ fn rules_propose_and_replace_as_they_say_on_the_same_child() {
             metric: Metric::Score,
             sessions: 0..s.sessions,
         };
-        let per_seed = crate::per_child::per_seed(&alone, Arm::Cluster, &window);
+        let per_seed = crate::child_study::per_child::per_seed(&alone, Arm::Cluster, &window);
         for (seed, (never, expected)) in r.runs[0].iter().zip(&per_seed).enumerate() {
             assert_eq!(never.proposals, 0.0);
             assert!((never.score - expected).abs() < 1e-12, "seed {seed}");

@@ -1,12 +1,12 @@
-//! `behaviour_policy experiments`: the paper's evaluation in simulation. Every user model x
+//! `policy_lab experiments`: the paper's evaluation in simulation. Every user model x
 //! reward (and the transfers) for R runs of E epochs, in parallel; writes the curves as CSV,
 //! the user-model tables used, Figs. 4 and 5 (SVG + PNG), and the last-epoch table.
 
 use super::{LearningArgs, parse_reward, progress_bar, user_models};
 use anyhow::{Context, bail};
-use behaviour_policy::grid::{GridSpec, run_grid};
-use behaviour_policy::plot::{Figure, curves_svg};
-use behaviour_policy::report::{curves_csv, last_epoch_table};
+use policy_lab::experiments::grid::{GridSpec, run_grid};
+use policy_lab::experiments::report::{curves_csv, last_epoch_table};
+use policy_lab::plots::{Figure, curves_svg};
 use q_learning::Reward;
 use q_learning::training::{EpochScheme, RunSpec};
 use std::path::PathBuf;

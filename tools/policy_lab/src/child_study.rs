@@ -1,0 +1,6 @@
+//! The leave-one-child-out studies on a study's children, each child's own fitted model
+//! standing in for the child: per-child adaptation (`per_child`) and supervised autonomy's
+//! proposal rules (`supervision`, on `per_child`'s children, policy and draws).
+
+pub mod per_child;
+pub mod supervision;
