@@ -1,16 +1,21 @@
 //! Interaction data: one [`InteractionRecord`] per solved sequence. Readers fill it from our CSV
-//! format ([`csv_file`]), from the MigrAVE study's own files ([`study`]) and from our recorded
+//! format (`csv_file`), from the MigrAVE study's own files (`study`) and from our recorded
 //! sessions ([`bag`]); all produce the same type, checked with [`InteractionRecord::validate`].
+//! The CSV readers are behind the `csv` feature.
 
 pub mod bag;
+#[cfg(feature = "csv")]
 pub mod csv_file;
+#[cfg(feature = "csv")]
 pub mod study;
 
 use sequence_game::{Feedback, Level, Outcome};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "csv")]
 pub use csv_file::{CSV_COLUMNS, read_csv, write_csv};
+#[cfg(feature = "csv")]
 pub use study::read_study;
 
 /// One solved sequence.
@@ -170,6 +175,7 @@ pub fn validate_all(records: &[InteractionRecord]) -> Result<(), DataError> {
 /// Reads a data set: a study directory (`sequences.csv` + `engagement_per_second.csv`), a
 /// CSV file in our format, a bag (`.mcap`) or a directory of bags. Warnings of the bag reader
 /// are logged; [`read_sources`] returns them.
+#[cfg(feature = "csv")]
 pub fn read_any(path: &Path) -> Result<Vec<InteractionRecord>, DataError> {
     read_sources(&[path.to_path_buf()]).map(|d| d.records)
 }
@@ -177,6 +183,7 @@ pub fn read_any(path: &Path) -> Result<Vec<InteractionRecord>, DataError> {
 /// Reads and joins several data sets (each as [`read_any`]): study directories and CSV files in
 /// the order given, then every bag named or found in a directory, read together (a user's
 /// sessions may be in several bags; see [`bag::read_bags`]).
+#[cfg(feature = "csv")]
 pub fn read_sources(paths: &[PathBuf]) -> Result<bag::BagRecords, DataError> {
     let mut out = bag::BagRecords::default();
     let mut bags = Vec::new();
