@@ -6,23 +6,23 @@ use crate::learning::QTable;
 use sequence_game::{ACTION_COUNT, STATE_COUNT, State};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use versioned_json::{FileError, Kind};
 
 pub const FORMAT: &str = "qt_therapy q_table";
 pub const VERSION: u32 = 1;
+/// The file's kind, read and written as the suite's other versioned files (`versioned_json`).
+pub const KIND: Kind = Kind {
+    format: FORMAT,
+    version: VERSION,
+    name: "Q-table",
+};
 
 #[derive(Debug, thiserror::Error)]
 pub enum QTableError {
-    #[error("{path}: {reason}")]
-    File { path: PathBuf, reason: String },
-    #[error("{path}, field {field}: {reason}")]
-    Field {
-        path: PathBuf,
-        field: String,
-        reason: String,
-    },
-    #[error("{path} is q_table format version {found}; this program reads version {VERSION}")]
-    Version { path: PathBuf, found: u64 },
+    /// The file, its layout or a field of it (named), as read or written.
+    #[error(transparent)]
+    File(#[from] FileError),
     #[error("user id {0:?} cannot name a file: use letters, digits, '-' and '_' only")]
     UserId(String),
 }
@@ -106,49 +106,25 @@ pub struct QTableFile {
 
 impl QTableFile {
     pub fn load(path: &Path) -> Result<QTableFile, QTableError> {
-        let text = std::fs::read_to_string(path).map_err(|e| QTableError::File {
-            path: path.into(),
-            reason: e.to_string(),
-        })?;
-        QTableFile::from_json_str(&text, path)
+        let stored: Stored = KIND.load(path)?;
+        QTableFile::from_stored(stored, path)
     }
 
     /// As [`QTableFile::load`], from the file's text (`path` only names it in errors).
     pub fn from_json_str(text: &str, path: &Path) -> Result<QTableFile, QTableError> {
-        let bad = |reason: String| QTableError::File {
-            path: path.into(),
-            reason,
-        };
-        let field = |field: String, reason: String| QTableError::Field {
-            path: path.into(),
-            field,
-            reason,
-        };
-        let value: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| bad(format!("not JSON (truncated?): {e}")))?;
-        if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
-            return Err(field(
-                "format".into(),
-                format!("is not {FORMAT:?}: not a Q-table file"),
-            ));
-        }
-        match value.get("version").and_then(serde_json::Value::as_u64) {
-            Some(v) if v == u64::from(VERSION) => {}
-            Some(found) => {
-                return Err(QTableError::Version {
-                    path: path.into(),
-                    found,
-                });
-            }
-            None => return Err(field("version".into(), "is missing".into())),
-        }
-        let stored: Stored =
-            serde_json::from_value(value).map_err(|e| bad(format!("malformed: {e}")))?;
+        let stored: Stored = KIND.from_json_str(text, path)?;
+        QTableFile::from_stored(stored, path)
+    }
+
+    /// The table of a file that has the layout: every state once, every Q-value finite.
+    fn from_stored(stored: Stored, path: &Path) -> Result<QTableFile, QTableError> {
+        let field = |field: String, reason: String| FileError::field(path, field, reason);
         if stored.states.len() != STATE_COUNT {
             return Err(field(
                 "states".into(),
                 format!("has {} rows, expected {STATE_COUNT}", stored.states.len()),
-            ));
+            )
+            .into());
         }
         let mut table = QTable::default();
         let mut seen = [false; STATE_COUNT];
@@ -161,10 +137,10 @@ impl QTableFile {
             )
             .map_err(|e| at(e.to_string()))?;
             if std::mem::replace(&mut seen[state.index()], true) {
-                return Err(at(format!("{state} appears twice")));
+                return Err(at(format!("{state} appears twice")).into());
             }
             if let Some(q) = row.q.iter().find(|q| !q.is_finite()) {
-                return Err(at(format!("Q-value {q} of {state} is not finite")));
+                return Err(at(format!("Q-value {q} of {state} is not finite")).into());
             }
             table.q[state.index()] = row.q;
             table.visits[state.index()] = row.visits;
@@ -180,10 +156,6 @@ impl QTableFile {
 
     /// Writes atomically: the old file stays whole until the new one is complete and synced.
     pub fn save(&self, path: &Path) -> Result<(), QTableError> {
-        let bad = |reason: String| QTableError::File {
-            path: path.into(),
-            reason,
-        };
         let stored = Stored {
             format: FORMAT.into(),
             version: VERSION,
@@ -201,8 +173,7 @@ impl QTableFile {
                 })
                 .collect(),
         };
-        let text = serde_json::to_string_pretty(&stored).map_err(|e| bad(e.to_string()))?;
-        atomic_file::write(path, text.as_bytes()).map_err(|e| bad(e.to_string()))
+        Ok(KIND.save(path, &stored)?)
     }
 }
 
@@ -255,7 +226,7 @@ mod tests {
             ),
             (good.replace(FORMAT, "something else"), "field format"),
             (good.replacen("\"level\": 1", "\"level\": 4", 1), "states["),
-            (good.replacen("1.25", "\"x\"", 1), "malformed"),
+            (good.replacen("1.25", "\"x\"", 1), "field states[5].q[2]"),
             (
                 good.replacen("\"visits\": 17", "\"visits\": 17, \"more\": 1", 1),
                 "more",

@@ -7,11 +7,18 @@ use crate::clustering::{Pca, nearest};
 use crate::gp::{GaussianProcess, GpError, Kernel, OptimiserOptions};
 use sequence_game::{ModelInput, Outcome, Prediction, UserModelTable};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use versioned_json::{FileError, Kind};
 
 pub const FORMAT: &str = "qt_therapy user models";
 /// 2: per-level stats gained `sequences`; their std is across users (1 had no `sequences`).
 pub const FORMAT_VERSION: u32 = 2;
+/// The file's kind, read and written as the suite's other versioned files (`versioned_json`).
+pub const KIND: Kind = Kind {
+    format: FORMAT,
+    version: FORMAT_VERSION,
+    name: "user-model",
+};
 
 /// Anything that goes wrong fitting, saving or loading user models, naming the culprit.
 #[derive(Debug, thiserror::Error)]
@@ -38,16 +45,9 @@ pub enum UserModelError {
     },
     #[error("fit options: {0}")]
     Options(String),
-    #[error("{path}: {reason}")]
-    File { path: PathBuf, reason: String },
-    #[error("{path}, field {field}: {reason}")]
-    Field {
-        path: PathBuf,
-        field: String,
-        reason: String,
-    },
-    #[error("{path} is format version {found}; this program reads version {FORMAT_VERSION}")]
-    Version { path: PathBuf, found: u64 },
+    /// The file, its layout or a field of it (named), as read or written.
+    #[error(transparent)]
+    File(#[from] FileError),
     #[error("user vector, value {index} = {value}: must be finite and in [{low}, {high}]")]
     UserVector {
         index: usize,
@@ -523,61 +523,28 @@ impl UserModelSet {
 
     /// Reads and checks a model file, naming the field at fault.
     pub fn load(path: &Path) -> Result<UserModelSet, UserModelError> {
-        let text = std::fs::read_to_string(path).map_err(|e| UserModelError::File {
-            path: path.into(),
-            reason: e.to_string(),
-        })?;
-        UserModelSet::from_json_str(&text, path)
+        UserModelSet::checked(KIND.load(path)?, path)
     }
 
     /// As [`UserModelSet::load`], from the file's text (`path` only names it in errors).
     pub fn from_json_str(text: &str, path: &Path) -> Result<UserModelSet, UserModelError> {
-        let bad = |reason: String| UserModelError::File {
-            path: path.into(),
-            reason,
-        };
-        let field = |(field, reason): Problem| UserModelError::Field {
-            path: path.into(),
-            field,
-            reason,
-        };
-        let value: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| bad(format!("not valid JSON (truncated?): {e}")))?;
-        if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
-            return Err(field((
-                "format".into(),
-                format!("is not {FORMAT:?}: not a user-model file"),
-            )));
-        }
-        let version = value.get("version").and_then(serde_json::Value::as_u64);
-        match version {
-            Some(v) if v == u64::from(FORMAT_VERSION) => {}
-            Some(found) => {
-                return Err(UserModelError::Version {
-                    path: path.into(),
-                    found,
-                });
-            }
-            None => return Err(field(("version".into(), "is missing".into()))),
-        }
-        let file: UserModelFile = serde_path_to_error::deserialize(value)
-            .map_err(|e| field((e.path().to_string(), e.inner().to_string())))?;
-        file.check().map_err(field)?;
+        UserModelSet::checked(KIND.from_json_str(text, path)?, path)
+    }
+
+    /// The models of a file that has the layout, once its content is checked.
+    fn checked(file: UserModelFile, path: &Path) -> Result<UserModelSet, UserModelError> {
+        file.check()
+            .map_err(|(field, reason)| FileError::field(path, field, reason))?;
         let set = UserModelSet::from_file(file)?;
         for t in &set.tables {
-            t.validate().map_err(|e| bad(e.to_string()))?;
+            t.validate().map_err(|e| FileError::file(path, e))?;
         }
         Ok(set)
     }
 
     /// Writes the file through a temporary file and a rename: never half a file.
     pub fn save(&self, path: &Path) -> Result<(), UserModelError> {
-        let bad = |reason: String| UserModelError::File {
-            path: path.into(),
-            reason,
-        };
-        let text = serde_json::to_string_pretty(&self.file).map_err(|e| bad(e.to_string()))?;
-        atomic_file::write(path, format!("{text}\n").as_bytes()).map_err(|e| bad(e.to_string()))
+        Ok(KIND.save(path, &self.file)?)
     }
 
     pub fn file(&self) -> &UserModelFile {

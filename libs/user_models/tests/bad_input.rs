@@ -141,7 +141,13 @@ fn truncated_wrong_version_and_bad_field_model_files_are_named() {
 
     std::fs::write(&bad, text.replacen("\"version\": 2", "\"version\": 1", 1)).expect("writes");
     let e = UserModelSet::load(&bad).expect_err("version");
-    assert!(matches!(e, UserModelError::Version { found: 1, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            UserModelError::File(versioned_json::FileError::Version { found: 1, .. })
+        ),
+        "{e}"
+    );
     assert!(
         e.to_string()
             .contains("format version 1; this program reads version 2"),
