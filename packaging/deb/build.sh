@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the qt-therapy Debian package from this workspace with dpkg-deb (Debian's own tool,
-# kept with dpkg itself): the suite's thirteen programs (stripped) and their manual pages
+# kept with dpkg itself): the suite's fourteen programs (stripped) and their manual pages
 # (each program writes its own from its command line's definition), its parameters as
 # conffiles in /etc/qt-therapy, models and launch files in /usr/share/qt-therapy, the systemd
 # unit; and beside it qt-therapy-dbgsym, the programs' debug symbols, as Debian's own builds
@@ -53,6 +53,7 @@ programs=(
   "engagement_classifier engagement_classifier engagement-classifier"
   "user_model user_model user-model"
   "behaviour_policy behaviour_policy behaviour-policy"
+  "policy_lab policy_lab policy-lab"
   "game_manager game_manager game-manager"
   "tablet_bridge tablet_bridge tablet-bridge"
   "tablet_bridge tablet_tls tls"

@@ -67,8 +67,8 @@ for f in /usr/lib/qt-therapy/start /lib/systemd/system/qt-therapy.service /etc/q
   /usr/share/doc/qt-therapy/install.md; do
   grep -qx "$f" "$work/files" || fail "$f is not in the package"
 done
-for p in launch game-manager behaviour-policy user-model engagement-classifier tablet-bridge \
-  openface-bridge simulated-child therapist bag report tls data; do
+for p in launch game-manager behaviour-policy policy-lab user-model engagement-classifier \
+  tablet-bridge openface-bridge simulated-child therapist bag report tls data; do
   grep -qx "/usr/bin/qt-therapy-$p" "$work/files" || fail "/usr/bin/qt-therapy-$p is not in the package"
   grep -qx "/usr/share/man/man1/qt-therapy-$p.1.gz" "$work/files" || fail "qt-therapy-$p has no manual page"
 done
