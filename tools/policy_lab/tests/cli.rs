@@ -396,7 +396,7 @@ fn evaluate_refuses_what_the_sample_bags_cannot_tell() {
 
 /// Writes `sessions` into a bag the way the suite records them: the policy's Decision per
 /// sequence (`q_learning::messages::decision_message`), the game manager's
-/// SequenceResult (`nodes/game_manager/src/game/outcome.rs`) and, for the sequences in
+/// SequenceResult (`nodes/game_manager/src/game/play.rs`) and, for the sequences in
 /// `fallbacks`, a GameState with `policy_fallback` (`nodes/game_manager/src/game/mod.rs`,
 /// `publish_state`: set for every state published while the fallback's sequence plays).
 fn write_bag(
