@@ -14,13 +14,14 @@ pub mod results;
 pub mod services;
 mod standard;
 pub mod topics;
+pub mod type_description;
 pub mod validate;
 
 pub use codes::{Command, CommandOutcome, GamePhase, ProposalStatus, UnknownCode};
 pub use definition::{MessageDefinition, RosType};
 pub use messages::*;
 pub use services::*;
-pub use standard::{builtin_interfaces, std_msgs};
+pub use standard::{builtin_interfaces, rosgraph_msgs, std_msgs};
 pub use validate::{InvalidMessage, Validate};
 
 /// The 32 OpenFace columns of `OpenFaceFeatures.features`, in order (see the `.msg`).

@@ -1,6 +1,6 @@
 //! Mirrors of the standard ROS 2 types our messages use (`builtin_interfaces/Time`,
-//! `std_msgs/Header`, `std_msgs/String`, `std_msgs/Bool`), with the DDS type names a ROS 2
-//! peer expects.
+//! `std_msgs/Header`, `std_msgs/String`, `std_msgs/Bool`, and `rosgraph_msgs/Clock` for the
+//! player's `/clock`), with the DDS type names a ROS 2 peer expects.
 
 use crate::definition::ros_message;
 
@@ -71,6 +71,18 @@ pub mod std_msgs {
         /// `std_msgs/Bool`, as ROS4HRI's latched `/humans/persons/<id>/anonymous` takes it.
         pub struct BoolMsg("std_msgs", "Bool", "bool data\n") {
             pub data: bool,
+        }
+    }
+}
+
+pub mod rosgraph_msgs {
+    use super::*;
+    use crate::builtin_interfaces::Time;
+
+    ros_message! {
+        /// `rosgraph_msgs/Clock` on `/clock`: simulated time, as `bag play --clock` publishes it.
+        pub struct Clock("rosgraph_msgs", "Clock", "builtin_interfaces/Time clock\n") {
+            pub clock: Time,
         }
     }
 }

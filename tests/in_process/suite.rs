@@ -207,7 +207,9 @@ impl Suite {
                     compression: None,
                 };
                 tokio::spawn(async move {
-                    let r = bag::recorder::run(&mut bus, params, what).await;
+                    let r =
+                        bag::recorder::run(&mut bus, params, what, bag::recorder::SuiteOnly, None)
+                            .await;
                     bus.stop().await;
                     r.map(|_| ())
                 })

@@ -15,6 +15,8 @@ pub struct TopicSummary {
     pub serialization_format: String,
     /// The offered QoS class (`reliable`, `state`, `features`) when the metadata names one.
     pub qos: Option<String>,
+    /// Why the topic has no definition (empty schema), when it has none.
+    pub definition_missing: Option<String>,
 }
 
 /// A bag's summary.
@@ -52,6 +54,14 @@ impl BagInfo {
                 qos: c
                     .offered_qos()
                     .map(|k| format!("{k:?}").to_ascii_lowercase()),
+                definition_missing: c.schema.as_ref().is_none_or(|s| s.data.is_empty()).then(
+                    || {
+                        c.metadata
+                            .get(crate::writer::DEFINITION_MISSING)
+                            .cloned()
+                            .unwrap_or_else(|| "the bag holds none".to_string())
+                    },
+                ),
             })
             .collect();
         let (chunks, compression) = reader.chunks();
@@ -139,8 +149,12 @@ impl BagInfo {
                 .qos
                 .as_deref()
                 .map_or(String::new(), |q| format!(" | QoS: {q}"));
+            let missing = x
+                .definition_missing
+                .as_deref()
+                .map_or(String::new(), |why| format!(" | No definition: {why}"));
             let text = format!(
-                "Topic: {:<width$} | Type: {} | Count: {} | Serialization Format: {}{qos}",
+                "Topic: {:<width$} | Type: {} | Count: {} | Serialization Format: {}{qos}{missing}",
                 x.topic, x.type_name, x.count, x.serialization_format
             );
             line(if i == 0 { "Topic information" } else { "" }, text);

@@ -55,6 +55,9 @@ impl Default for WriterOptions {
     }
 }
 
+/// Channel metadata key: why a channel has no definition (its publisher could not be asked).
+pub const DEFINITION_MISSING: &str = "definition_missing";
+
 /// When a message was logged and published (ns since the epoch), and its sequence number.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Stamp {
@@ -182,12 +185,30 @@ impl<W: Write + Seek> BagWriter<W> {
         schema_text: &str,
         qos_yaml: &str,
     ) -> Result<u16, BagError> {
+        self.add_foreign_channel(topic, type_name, schema_text, qos_yaml, None)
+    }
+
+    /// As [`Self::add_channel`], for a topic whose definition may be unknown (a topic of the
+    /// ROS 2 graph that is not the suite's): without one the schema is empty and the channel's
+    /// metadata says why (`definition_missing`), which `bag info` shows.
+    pub fn add_foreign_channel(
+        &mut self,
+        topic: &str,
+        type_name: &str,
+        schema_text: &str,
+        qos_yaml: &str,
+        definition_missing: Option<&str>,
+    ) -> Result<u16, BagError> {
         let bag = self.bag.clone();
         let mcap = self.mcap()?;
         let schema = mcap
             .add_schema(type_name, "ros2msg", schema_text.as_bytes())
             .map_err(|e| write_error(&bag, &format!("the schema of {type_name}"), e))?;
-        let metadata = BTreeMap::from([("offered_qos_profiles".to_string(), qos_yaml.to_string())]);
+        let mut metadata =
+            BTreeMap::from([("offered_qos_profiles".to_string(), qos_yaml.to_string())]);
+        if let Some(why) = definition_missing {
+            metadata.insert(DEFINITION_MISSING.to_string(), why.to_string());
+        }
         let id = mcap
             .add_channel(schema, topic, "cdr", &metadata)
             .map_err(|e| write_error(&bag, &format!("the channel of {topic}"), e))?;

@@ -94,6 +94,19 @@ pub trait Bus {
         timeout: Duration,
     ) -> impl Future<Output = bool>;
 
+    /// Waits until node `node` subscribes to `outbox`'s topic, or `timeout` passes; true if it
+    /// does. Over DDS the node is the one its participant announces on ros_discovery_info; the
+    /// in-process bus has no ROS graph, and any subscriber will do.
+    fn wait_for_node_subscription<M: MessageDefinition>(
+        &self,
+        outbox: &Outbox<M>,
+        node: &str,
+        timeout: Duration,
+    ) -> impl Future<Output = bool> {
+        let _ = node;
+        self.wait_for_subscribers(outbox, timeout)
+    }
+
     /// Resolves when the node is asked to stop (SIGINT or SIGTERM over DDS).
     fn shutdown_signal(&self) -> impl Future<Output = ()> + Send + 'static;
 }

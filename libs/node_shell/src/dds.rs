@@ -96,6 +96,15 @@ impl Bus for NodeShell {
         self.dds_wait_for_subscribers(outbox, timeout)
     }
 
+    fn wait_for_node_subscription<M: MessageDefinition>(
+        &self,
+        outbox: &Outbox<M>,
+        node: &str,
+        timeout: Duration,
+    ) -> impl Future<Output = bool> {
+        self.dds_wait_for_node_subscription(outbox, node, timeout)
+    }
+
     fn shutdown_signal(&self) -> impl Future<Output = ()> + Send + 'static {
         NodeShell::shutdown_signal(self)
     }

@@ -11,8 +11,10 @@
 //! One module per job: `options` (command line, parameter files), `environment` (domain,
 //! localhost-only), `qos`, `names`, `participant` (start-up), `publish`, `subscribe`,
 //! `services`, `tap`, `heartbeat`, `shutdown` (signals, clean stop), `security`, `dds_watch`,
-//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`; and
-//! `instance_lock`, the `instance_lock` library's, which offline tools use too.
+//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`, `graph`
+//! (which node owns an endpoint), `foreign` (topics not the suite's), `type_hashes` (the type
+//! hash each endpoint announces); and `instance_lock`, the `instance_lock` library's, which
+//! offline tools use too.
 
 pub mod bus;
 pub mod clock;
@@ -20,6 +22,8 @@ mod dds;
 pub mod dds_watch;
 pub mod drops;
 mod environment;
+pub mod foreign;
+pub mod graph;
 pub mod heartbeat;
 pub mod in_process;
 pub mod logging;
@@ -34,6 +38,7 @@ mod services;
 mod shutdown;
 mod subscribe;
 pub mod tap;
+pub mod type_hashes;
 
 pub use bus::{Bus, CallError, Outbox, ServiceCall, ServiceClient};
 pub use clock::Clock;

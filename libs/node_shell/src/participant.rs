@@ -27,14 +27,17 @@ pub struct NodeShell {
     pub(crate) drops: Arc<DropLog>,
     pub(crate) shutdown: watch::Receiver<bool>,
     pub(crate) clock: Clock,
+    // The nodes every participant announces (ros_discovery_info).
+    pub(crate) graph: crate::graph::Graph,
     // Tasks that own DDS entities: stopped before the participant goes, so RustDDS can
     // remove them cleanly.
     pub(crate) tasks: Vec<tokio::task::JoinHandle<()>>,
     // Ends the process if RustDDS's threads end; dropped (stopped) before the participant,
     // whose threads end at a clean stop too.
     _dds_watch: Option<crate::dds_watch::ThreadWatch>,
-    // Kept so the DDS participant outlives every entity created from it.
-    _context: Context,
+    // Kept so the DDS participant outlives every entity created from it; its participant
+    // holds the type hashes endpoints announce (`type_hashes`).
+    pub(crate) context: Context,
 }
 
 impl NodeShell {
@@ -86,6 +89,9 @@ impl NodeShell {
             }
             None => format!("creating the DDS participant in domain {domain}"),
         })?;
+        // Before the context makes its first endpoint (its ros_discovery_info writer).
+        crate::type_hashes::announce_builtin_types(&participant)
+            .context("describing ROS 2's builtin types")?;
         let context = Context::from_domain_participant(participant)
             .context("creating the ros2-client context")?;
         let node_name = NodeName::new(&options.namespace, &name).map_err(|e| {
@@ -98,6 +104,7 @@ impl NodeShell {
             .new_node(node_name, NodeOptions::new().enable_rosout(false))
             .with_context(|| format!("creating node {name}"))?;
         let (rosout, rosout_drain) = rosout(&context, &mut node)?;
+        let (graph, graph_task) = crate::graph::follow(&context, &mut node)?;
         let spinner = node.spinner().context("starting the node's spinner")?;
         // RustDDS 0.15.1 deadlocks a secured participant when one thread creates a reader or
         // writer (security-plugins lock, then participant lock) while another creates a topic
@@ -137,9 +144,10 @@ impl NodeShell {
             drops: Arc::new(DropLog::default()),
             shutdown,
             clock: Clock::wall(),
-            tasks: vec![spinner_task, rosout_drain],
+            graph,
+            tasks: vec![spinner_task, rosout_drain, graph_task],
             _dds_watch: dds_watch,
-            _context: context,
+            context,
         };
         let heartbeat = crate::heartbeat::start(&mut shell)?;
         shell.tasks.push(heartbeat);
@@ -153,6 +161,11 @@ impl NodeShell {
     /// Counts of dropped input, per topic and reason.
     pub fn drops(&self) -> Arc<DropLog> {
         self.drops.clone()
+    }
+
+    /// The ROS 2 graph's nodes, as their participants announce them.
+    pub fn graph(&self) -> &crate::graph::Graph {
+        &self.graph
     }
 
     /// The underlying ros2-client node, for what the shell does not wrap (the DDS benchmarks'

@@ -16,6 +16,7 @@ impl NodeShell {
         topic: Topic<M>,
     ) -> anyhow::Result<Outbox<M>> {
         let qos = qos_profile(topic.qos);
+        crate::type_hashes::announce_message::<M>(&self.context.domain_participant())?;
         let dds_topic = self
             .node
             .create_topic(&ros_name(topic.name)?, dds_type_name::<M>(), &qos)
@@ -52,5 +53,47 @@ impl NodeShell {
             tokio::time::sleep(std::time::Duration::from_millis(200)).await;
         }
         matched
+    }
+
+    /// Waits until node `node` (`name` or `/ns/name`) has a subscriber of `outbox`'s topic
+    /// that discovery reported and our writer matched (then the same settle), or `timeout`
+    /// passes; true if it has. The node is known by what its participant announces on
+    /// ros_discovery_info (`graph`).
+    pub(crate) async fn dds_wait_for_node_subscription<M: MessageDefinition>(
+        &self,
+        outbox: &Outbox<M>,
+        node: &str,
+        timeout: std::time::Duration,
+    ) -> bool {
+        let Writer::Dds(publisher) = &outbox.writer else {
+            return false;
+        };
+        let wanted = if node.starts_with('/') {
+            node.to_string()
+        } else {
+            format!("/{node}")
+        };
+        // The suite's topics are absolute: `/a/b` is `rt/a/b` on DDS.
+        let dds_topic = format!("rt{}", outbox.topic);
+        let participant = self.context.domain_participant();
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let announced = participant.discovered_readers().iter().any(|r| {
+                r.subscription_topic_data.topic_name() == &dds_topic
+                    && self
+                        .graph
+                        .reader_node(r.reader_proxy.remote_reader_guid)
+                        .as_deref()
+                        == Some(wanted.as_str())
+            });
+            if announced && publisher.get_subscription_count(&self.node) > 0 {
+                tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+                return true;
+            }
+            if tokio::time::Instant::now() >= deadline {
+                return false;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        }
     }
 }

@@ -27,6 +27,7 @@ impl NodeShell {
         S: ServiceDefinition + 'static,
         S::Request: Validate,
     {
+        crate::type_hashes::announce_service::<S>(&self.context.domain_participant())?;
         let server = self
             .node
             .create_server::<S::Request, S::Response>(
@@ -67,6 +68,7 @@ impl NodeShell {
         &mut self,
         service: Service<S>,
     ) -> anyhow::Result<ServiceClient<S>> {
+        crate::type_hashes::announce_service::<S>(&self.context.domain_participant())?;
         let client = self
             .node
             .create_client::<S::Request, S::Response>(

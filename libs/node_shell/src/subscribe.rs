@@ -22,6 +22,7 @@ impl NodeShell {
         M: MessageDefinition + Validate,
     {
         let qos = qos_profile(topic.qos);
+        crate::type_hashes::announce_message::<M>(&self.context.domain_participant())?;
         let dds_topic = self
             .node
             .create_topic(&ros_name(topic.name)?, dds_type_name::<M>(), &qos)

@@ -41,6 +41,7 @@ impl NodeShell {
         F: Fn(Tapped<M>) -> Option<T> + Send + 'static,
     {
         let qos = qos_profile(topic.qos);
+        crate::type_hashes::announce_message::<M>(&self.context.domain_participant())?;
         let name = ros_name(topic.name)?;
         let drops = self.drops.clone();
         let node = &mut self.node;

@@ -1,6 +1,7 @@
 //! `bag`: records the suite's topics over DDS into an MCAP bag (`record`), publishes a bag's
 //! messages back on their topics (`play`), and summarises a bag like `ros2 bag info` (`info`).
 
+mod graph_topics;
 mod info;
 mod play;
 mod record;

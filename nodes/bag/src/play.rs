@@ -8,7 +8,10 @@ use bag::params::PlayerParams;
 use bag_file::schedule::{PlayOptions, parse_remap, plan};
 use bag_file::suite::suite_type;
 use bag_file::{BagReader, ChannelInfo};
-use node_shell::{NodeShell, ShellOptions};
+use node_shell::{NodeShell, Outbox, ShellOptions};
+use qt_therapy_msgs::builtin_interfaces::Time;
+use qt_therapy_msgs::rosgraph_msgs::Clock;
+use qt_therapy_msgs::topics::Topic;
 use qt_therapy_msgs::topics::{QosKind, all_topics};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -36,6 +39,11 @@ pub struct PlayArgs {
     /// Seconds of the bag to skip at its start [default: the parameter file's]
     #[arg(long)]
     pub start_offset: Option<f64>,
+    /// Publish the bag's time on /clock (rosgraph_msgs/Clock, best effort) this many times a
+    /// second, as `ros2 bag play --clock` does (40 when given without a rate): nodes with
+    /// use_sim_time follow the played bag.
+    #[arg(long, value_name = "HZ", num_args = 0..=1, default_missing_value = "40")]
+    pub clock: Option<f64>,
     #[command(flatten)]
     pub shell: ShellOptions,
 }
@@ -67,6 +75,55 @@ fn playable(c: &ChannelInfo) -> Result<(), String> {
 fn seconds(value: f64, what: &str) -> anyhow::Result<Duration> {
     Duration::try_from_secs_f64(value)
         .map_err(|_| anyhow::anyhow!("{what} = {value} s is not a non-negative duration"))
+}
+
+/// `/clock` as rosbag2's player publishes it (`rclcpp::ClockQoS`: best effort, volatile).
+const CLOCK: Topic<Clock> = Topic::new("/clock", QosKind::Features);
+
+/// The bag's time while it plays, for `/clock`: the first played message's log time plus the
+/// time played since, times the rate; as fast as possible, the last played message's.
+struct BagClock {
+    outbox: Outbox<Clock>,
+    first_log_time: i64,
+    first_at: Duration,
+    rate: Option<f64>,
+    last_played: i64,
+}
+
+impl BagClock {
+    fn now(&self, start: Instant) -> i64 {
+        match self.rate {
+            Some(rate) => {
+                let played = start.elapsed().saturating_sub(self.first_at).as_secs_f64() * rate;
+                self.first_log_time + (played * 1e9) as i64
+            }
+            None => self.last_played,
+        }
+    }
+
+    fn tick(&self, start: Instant) {
+        self.outbox.send(Clock {
+            clock: Time::from_nanos(self.now(start)),
+        });
+    }
+}
+
+/// The next tick of the `/clock` interval (never without one).
+async fn next_tick(ticks: &mut Option<tokio::time::Interval>) {
+    match ticks {
+        Some(t) => {
+            t.tick().await;
+        }
+        None => std::future::pending().await,
+    }
+}
+
+/// The log time of the bag's `index`th message.
+fn messages_log_time(reader: &BagReader, index: usize) -> i64 {
+    reader
+        .raw_messages()
+        .get(index)
+        .map_or(0, |m| m.log_time as i64)
 }
 
 /// A year from now: "never" for a player.
@@ -136,6 +193,26 @@ pub async fn run(args: PlayArgs) -> anyhow::Result<()> {
         let name: &'static str = Box::leak(out.topic.clone().into_boxed_str());
         publishers.push(ty.publisher(&mut shell, name, qos)?);
     }
+    let (mut clock, mut ticks) = match args.clock {
+        None => (None, None),
+        Some(hz) if hz.is_finite() && hz > 0.0 => {
+            let first = plan
+                .due
+                .first()
+                .map(|d| (messages_log_time(&reader, d.index), d.at));
+            let (first_log_time, first_at) = first.unwrap_or((0, Duration::ZERO));
+            let clock = BagClock {
+                outbox: shell.publisher(CLOCK)?,
+                first_log_time,
+                first_at,
+                rate: options.rate,
+                last_played: first_log_time,
+            };
+            let ticks = tokio::time::interval(Duration::from_secs_f64(1.0 / hz));
+            (Some(clock), Some(ticks))
+        }
+        Some(hz) => bail!("--clock {hz}: the rate must be a positive number of Hz"),
+    };
     let linger = seconds(params.linger_s, "bag_player.linger_s")?;
     let wait = seconds(
         params.wait_for_subscribers_s,
@@ -167,12 +244,23 @@ pub async fn run(args: PlayArgs) -> anyhow::Result<()> {
         let start = Instant::now();
         progress.reset();
         for due in &plan.due {
-            tokio::select! {
-                _ = &mut stop => {
-                    stopped = true;
-                    break 'passes;
+            let at = start.checked_add(due.at).unwrap_or_else(far_future);
+            loop {
+                tokio::select! {
+                    _ = &mut stop => {
+                        stopped = true;
+                        break 'passes;
+                    }
+                    _ = next_tick(&mut ticks), if ticks.is_some() => {
+                        if let Some(c) = &clock {
+                            c.tick(start);
+                        }
+                    }
+                    _ = tokio::time::sleep_until(at) => break,
                 }
-                _ = tokio::time::sleep_until(start.checked_add(due.at).unwrap_or_else(far_future)) => {}
+            }
+            if let Some(c) = &mut clock {
+                c.last_played = messages[due.index].log_time as i64;
             }
             match publishers[due.output].publish_cdr(&messages[due.index].data) {
                 Ok(()) => published += 1,
@@ -189,6 +277,12 @@ pub async fn run(args: PlayArgs) -> anyhow::Result<()> {
         }
     }
     progress.finish_and_clear();
+    // The bag's last time, so a late subscriber's clock ends where the bag did.
+    if let Some(c) = &clock {
+        c.outbox.send(Clock {
+            clock: Time::from_nanos(c.last_played),
+        });
+    }
     // Stay a moment so reliable samples still in flight get delivered (not after a signal).
     if !stopped {
         tokio::select! {

@@ -15,7 +15,8 @@ pub struct RecordArgs {
     /// Topics to record [default: the parameter file's list; empty = all]
     #[arg(long, num_args = 1..)]
     pub topics: Vec<String>,
-    /// Record every topic of the suite, whatever the parameter file lists.
+    /// Record every topic: the suite's, whatever the parameter file lists, and every other
+    /// topic of the ROS 2 graph, with its definition when the publisher gives it.
     #[arg(long, conflicts_with = "topics")]
     pub all: bool,
     /// zstd, lz4 or none [default: the parameter file's]
@@ -39,7 +40,17 @@ pub async fn run(args: RecordArgs) -> anyhow::Result<()> {
         topics,
         compression: args.compression,
     };
-    let recorded = bag::recorder::run(&mut shell, params, what).await;
+    let recorded = if args.all {
+        // Every topic of the graph, the suite's and any other (graph_topics).
+        let suite = qt_therapy_msgs::topics::all_topics()
+            .into_iter()
+            .map(|t| t.name.to_string());
+        let capacity = usize::try_from(params.queue_capacity.max(1)).unwrap_or(4096);
+        let (graph, samples) = crate::graph_topics::GraphTopics::new(suite, capacity);
+        bag::recorder::run(&mut shell, params, what, graph, Some(samples)).await
+    } else {
+        bag::recorder::run(&mut shell, params, what, bag::recorder::SuiteOnly, None).await
+    };
     if let Ok(messages) = &recorded {
         println!(
             "{}",

@@ -20,6 +20,53 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::sync::mpsc;
 
+/// A topic found on the bus beside the suite's (over DDS with `--all`: any other topic of the
+/// ROS 2 graph), to record as its publisher sends it.
+#[derive(Debug, Clone)]
+pub struct ForeignTopic {
+    pub topic: String,
+    /// `pkg/msg/Type`.
+    pub type_name: String,
+    /// Its definition as rosbag2 stores it (`ros2msg`), or why there is none: the bag then
+    /// says so (`bag info`), and its messages are recorded all the same.
+    pub definition: Result<String, String>,
+    /// The QoS class nearest to what its publisher offers.
+    pub qos: QosKind,
+}
+
+/// One message of a foreign topic, as it arrived.
+#[derive(Debug, Clone)]
+pub struct ForeignSample {
+    pub topic: String,
+    pub stamp: Stamp,
+    /// CDR with its encapsulation header.
+    pub payload: Vec<u8>,
+}
+
+/// What finds the topics beside the suite's and taps them (their samples go to the receiver
+/// given to [`run`]); asked at every flush.
+pub trait Discover<B> {
+    /// The topics found since the last call (their taps already started).
+    fn discover(&mut self, bus: &mut B) -> impl std::future::Future<Output = Vec<ForeignTopic>>;
+}
+
+/// No topics beside the suite's (the in-process bus, or a recording of chosen topics).
+pub struct SuiteOnly;
+
+impl<B> Discover<B> for SuiteOnly {
+    async fn discover(&mut self, _bus: &mut B) -> Vec<ForeignTopic> {
+        Vec::new()
+    }
+}
+
+/// The next foreign sample, or never without a receiver.
+async fn next_foreign(rx: &mut Option<mpsc::Receiver<ForeignSample>>) -> Option<ForeignSample> {
+    match rx {
+        Some(rx) => rx.recv().await,
+        None => std::future::pending().await,
+    }
+}
+
 /// The node's name on the graph (and its parameter file's).
 pub const NODE: &str = "bag_recorder";
 
@@ -183,10 +230,12 @@ fn write_sample(
 
 /// Records `what` with `params` until the node is asked to stop, then finishes the bag;
 /// returns how many messages it holds.
-pub async fn run<B: Bus + 'static>(
+pub async fn run<B: Bus + 'static, D: Discover<B>>(
     bus: &mut B,
     params: RecorderParams,
     what: Recording,
+    mut beside: D,
+    mut foreign: Option<mpsc::Receiver<ForeignSample>>,
 ) -> anyhow::Result<u64> {
     if !(params.flush_interval_s > 0.0 && params.flush_interval_s <= 60.0) {
         bail!(
@@ -246,6 +295,7 @@ pub async fn run<B: Bus + 'static>(
     let stop = bus.shutdown_signal();
     tokio::pin!(stop);
     let mut flush = tokio::time::interval(Duration::from_secs_f64(params.flush_interval_s));
+    let mut foreign_channels: BTreeMap<String, u16> = BTreeMap::new();
     loop {
         // Biased: what is ready is taken in this order, never by tokio's random pick, so a
         // run on the in-process bus is the same every time.
@@ -257,12 +307,31 @@ pub async fn run<B: Bus + 'static>(
                 while let Ok(sample) = rx.try_recv() {
                     write_sample(&mut writer, &mut carried, sample)?;
                 }
+                // Topics beside the suite's: channels before their first samples are taken.
+                for t in beside.discover(bus).await {
+                    let (schema, missing) = match &t.definition {
+                        Ok(text) => (text.as_str(), None),
+                        Err(why) => ("", Some(why.as_str())),
+                    };
+                    if let Some(why) = missing {
+                        tracing::warn!(topic = %t.topic, "recorded without its definition: {why}");
+                    } else {
+                        tracing::info!(topic = %t.topic, type_name = %t.type_name, "recording a topic of the graph");
+                    }
+                    let id = writer.add_foreign_channel(&t.topic, &t.type_name, schema, &offered_qos_yaml(t.qos), missing)?;
+                    foreign_channels.insert(t.topic.clone(), id);
+                }
                 writer.flush_chunk()?;
                 progress.set_message(format!("{} messages", writer.message_count()));
                 progress.tick();
             }
             Some(sample) = rx.recv() => {
                 write_sample(&mut writer, &mut carried, sample)?;
+            }
+            Some(sample) = next_foreign(&mut foreign) => {
+                if let Some(id) = foreign_channels.get(&sample.topic) {
+                    writer.write_cdr(*id, sample.stamp, &sample.payload)?;
+                }
             }
         }
     }
@@ -272,6 +341,13 @@ pub async fn run<B: Bus + 'static>(
     // What the readers already queued is part of the session.
     while let Ok(sample) = rx.try_recv() {
         write_sample(&mut writer, &mut carried, sample)?;
+    }
+    if let Some(foreign) = &mut foreign {
+        while let Ok(sample) = foreign.try_recv() {
+            if let Some(id) = foreign_channels.get(&sample.topic) {
+                writer.write_cdr(*id, sample.stamp, &sample.payload)?;
+            }
+        }
     }
     for t in taps {
         let _ = t.await;

@@ -83,6 +83,18 @@ pub async fn run(
     let (decided_tx, mut decided) = mpsc::channel::<Input>(16);
     let mut robot = Robot::new(bus, &params, decided_tx.clone())?;
     robot.check(bus, Duration::from_secs(5)).await;
+    let unheard = tokio::select! {
+        biased;
+        _ = bus.shutdown_signal() => return Ok(()),
+        unheard = robot.wait_for_listener(
+            bus,
+            &params.robot.robot_speech_node,
+            Duration::from_secs_f64(params.robot.robot_call_timeout_s),
+        ) => unheard,
+    };
+    if let Some(reason) = &unheard {
+        tracing::warn!("{reason}");
+    }
     // (due time, timer id) of the timers the core asked for.
     let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
     if params.timing.policy_startup_wait_s > 0.0 {
@@ -126,6 +138,9 @@ pub async fn run(
         clock,
     };
     ctx.apply(initial);
+    if let Some(reason) = unheard {
+        ctx.apply(core.handle(Input::RobotUnheard { reason }, clock.now_nanos()));
+    }
     let stop = bus.shutdown_signal();
     tokio::pin!(stop);
     loop {

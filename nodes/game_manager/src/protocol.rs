@@ -33,6 +33,9 @@ pub enum Input {
     RobotDone { step: u64 },
     /// `qtrobot` backend: a call of the step failed or was not answered in time.
     RobotFailed { step: u64, reason: String },
+    /// `topics` backend: the robot's speech subscriber (`robot_speech_node`) did not come; the
+    /// reason is shown until the game's next change of state.
+    RobotUnheard { reason: String },
     /// The node is going down: save the session.
     Shutdown { reason: String },
 }

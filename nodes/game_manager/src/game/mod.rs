@@ -248,6 +248,11 @@ impl GameManager {
             },
             Input::RobotDone { step } => self.on_robot_done(step, now),
             Input::RobotFailed { step, reason } => self.on_robot_failed(step, &reason, now),
+            Input::RobotUnheard { reason } => {
+                self.out.push(Output::Alarm(reason.clone()));
+                self.status = reason;
+                self.publish_state(now);
+            }
             Input::Shutdown { reason } => {
                 if self.session_running() {
                     self.end_session(SessionEnd::NodeShutdown, &reason, now);

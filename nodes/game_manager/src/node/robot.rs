@@ -169,6 +169,32 @@ impl Robot {
         }
     }
 
+    /// `topics`: waits (at most `wait`) until node `node` subscribes to the speech topic, so
+    /// the robot hears the first line (a game manager started beside an already running
+    /// robot spoke before discovery had matched the robot's subscriber, and the line was
+    /// lost). The reason when it never does; None at once for the services.
+    pub async fn wait_for_listener(
+        &self,
+        bus: &impl Bus,
+        node: &str,
+        wait: Duration,
+    ) -> Option<String> {
+        let Robot::Topics { speech, .. } = self else {
+            return None;
+        };
+        if node.is_empty() || bus.wait_for_node_subscription(speech, node, wait).await {
+            if !node.is_empty() {
+                tracing::info!("the robot's speech subscriber ({node}) is there");
+            }
+            return None;
+        }
+        Some(format!(
+            "the robot ({node}) did not subscribe to {} within {wait:?}: it may miss what is \
+             said; check that the robot's speech node runs",
+            speech.topic()
+        ))
+    }
+
     pub fn act(&mut self, act: Act) {
         match self {
             Robot::Topics {

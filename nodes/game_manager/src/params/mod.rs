@@ -220,6 +220,11 @@ parameter_groups! {
         /// ros1_bridge) or `qtrobot_ros2` (QTrobot V3's ROS 2 gateway): each service returns
         /// when the robot has finished, and the game waits for them.
         robot_backend: String = "topics".into(),
+        /// `topics`: the node of the robot's speech subscriber. At start-up the game manager
+        /// waits (at most `robot_call_timeout_s`) until that node subscribes to the speech
+        /// topic, so the robot hears the first line; if it never does, the reason is the game
+        /// state's status (the therapist's page). "": no wait.
+        robot_speech_node: String = String::new(),
         /// `qtrobot`, `qtrobot_ros2`: a call not answered within this many seconds (real
         /// time) fails; the session is then paused with the reason.
         robot_call_timeout_s: f64 = 60.0,

@@ -24,7 +24,7 @@ fn shipped_yaml_is_the_default_and_valid() {
 }
 
 /// Every key of the parameter file, in the order an unknown key's error lists them.
-const KEYS: [&str; 50] = [
+const KEYS: [&str; 51] = [
     "seed",
     "sequences_per_session",
     "max_identical_in_a_row",
@@ -67,6 +67,7 @@ const KEYS: [&str; 50] = [
     "auto_resume_after_node_loss",
     "recovery_max_age_s",
     "robot_backend",
+    "robot_speech_node",
     "robot_call_timeout_s",
     "robot_gesture_speed",
     "qtrobot_ros2_stop_namespace",

@@ -1,6 +1,6 @@
 // use mio::Token;
 use std::{
-  collections::HashMap,
+  collections::{BTreeMap, HashMap},
   io,
   io::ErrorKind,
   net::{IpAddr, Ipv4Addr},
@@ -541,6 +541,26 @@ impl DomainParticipant {
     self.dpi.lock().ok().and_then(|g| g.only_networks())
   }
 
+  /// Sets the USER_DATA QoS that every DataReader and DataWriter of `type_name` created on
+  /// this participant from now on announces in discovery (an empty `user_data` announces
+  /// none). ROS 2 (Iron and later) carries an endpoint's type hash there
+  /// (`typehash=RIHS01_<hex>;`), and `ros2 topic info -v` shows it.
+  pub fn set_endpoint_user_data(&self, type_name: &str, user_data: Vec<u8>) {
+    if let Ok(mut dp) = self.dpi.lock() {
+      dp.endpoint_user_data.insert(type_name.to_string(), user_data);
+    }
+  }
+
+  /// The USER_DATA of new endpoints of `type_name` (see [`Self::set_endpoint_user_data`]).
+  pub(crate) fn endpoint_user_data(&self, type_name: &str) -> Vec<u8> {
+    self
+      .dpi
+      .lock()
+      .ok()
+      .and_then(|dp| dp.endpoint_user_data.get(type_name).cloned())
+      .unwrap_or_default()
+  }
+
   /// Gets all DiscoveredTopics from DDS network
   ///
   /// # Examples
@@ -958,6 +978,9 @@ pub(crate) struct DomainParticipantDisc {
   discovery_join_handle: std::sync::mpsc::Receiver<JoinHandle<()>>,
   // This allows deterministic generation of EntityIds for DataReader, DataWriter, etc.
   entity_id_generator: atomic::AtomicU32,
+  // USER_DATA announced for the readers and writers of a type (by type name), see
+  // `DomainParticipant::set_endpoint_user_data`.
+  endpoint_user_data: BTreeMap<String, Vec<u8>>,
 }
 
 impl DomainParticipantDisc {
@@ -1003,6 +1026,7 @@ impl DomainParticipantDisc {
       discovery_command_sender,
       discovery_join_handle,
       entity_id_generator: atomic::AtomicU32::new(0),
+      endpoint_user_data: BTreeMap::new(),
     })
   }
 

@@ -195,6 +195,9 @@ enum DiscoveryTimerEvent {
   ParticipantCleanup,
   TopicCleanup,
   PublishParticipantMessage,
+  // Announce every local reader and writer again, a while after a new participant appeared
+  // (see `REPUBLISH_DELAY`).
+  RepublishLocalEndpoints,
   #[cfg(feature = "security")]
   CachedSecureMessageResend,
 }
@@ -296,12 +299,16 @@ pub(crate) struct Discovery {
   // discovery phase. See `spdp_receive`.
   #[cfg(feature = "security")]
   spdp_quick_response_sent: std::collections::HashSet<GuidPrefix>,
+  // A re-announcement of our endpoints is scheduled (`RepublishLocalEndpoints`).
+  republish_pending: bool,
 }
 
 impl Discovery {
   const PARTICIPANT_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(2);
   const TOPIC_CLEANUP_PERIOD: StdDuration = StdDuration::from_secs(60); // timer for cleaning up inactive topics
   const SPDP_PUBLISH_PERIOD: StdDuration = StdDuration::from_secs(10);
+  // After a new participant appears: long enough for both sides' first exchange to settle.
+  const REPUBLISH_DELAY: StdDuration = StdDuration::from_secs(2);
   const CHECK_PARTICIPANT_MESSAGES: StdDuration = StdDuration::from_secs(1);
   #[cfg(feature = "security")]
   const CACHED_SECURE_DISCOVERY_MESSAGE_RESEND_PERIOD: StdDuration = StdDuration::from_secs(1);
@@ -693,6 +700,7 @@ impl Discovery {
       dcps_participant_volatile_message_secure,
       #[cfg(feature = "security")]
       spdp_quick_response_sent: std::collections::HashSet::new(),
+      republish_pending: false,
     })
   }
 
@@ -875,6 +883,16 @@ impl Discovery {
                     Self::PARTICIPANT_CLEANUP_PERIOD,
                     DiscoveryTimerEvent::ParticipantCleanup,
                   );
+                }
+                DiscoveryTimerEvent::RepublishLocalEndpoints => {
+                  self.republish_pending = false;
+                  let db = discovery_db_read(&self.discovery_db);
+                  for reader in db.get_all_local_topic_readers() {
+                    self.sedp_publish_single_user_reader(reader);
+                  }
+                  for writer in db.get_all_local_topic_writers() {
+                    self.sedp_publish_single_user_writer(writer);
+                  }
                 }
                 DiscoveryTimerEvent::TopicCleanup => {
                   self.topic_cleanup();
@@ -1085,6 +1103,17 @@ impl Discovery {
           StdDuration::from_millis(10),
           DiscoveryTimerEvent::SendParticipantInfo { reschedule: false },
         );
+        // And our endpoints once more, a while later: a Fast DDS 2.14 peer that got our
+        // endpoints' SEDP data while we were new to each other at times acknowledged it but
+        // never paired some of them with its readers (rcl then had no ros_discovery_info of
+        // ours). Announced again, it pairs them. One pending at a time.
+        if !self.republish_pending {
+          self.republish_pending = true;
+          self.discovery_timer.borrow_mut().set_timeout(
+            Self::REPUBLISH_DELAY,
+            DiscoveryTimerEvent::RepublishLocalEndpoints,
+          );
+        }
       }
 
       // This may be a rediscovery of a previously seen participant that

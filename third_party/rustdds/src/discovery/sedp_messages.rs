@@ -308,6 +308,19 @@ impl SubscriptionBuiltinTopicData {
 // =======================================================================
 // =======================================================================
 
+/// The octets of a USER_DATA parameter (a CDR sequence<octet>: length, octets, padding); none
+/// when it is absent or malformed, which must not make the rest of the data unusable.
+fn user_data_octets(
+  pl_map: &std::collections::BTreeMap<ParameterId, Vec<&Parameter>>,
+  ctx: speedy::Endianness,
+) -> Vec<u8> {
+  pl_map
+    .get(&ParameterId::PID_USER_DATA)
+    .and_then(|v| v.first())
+    .and_then(|p| Vec::<u8>::read_from_buffer_with_ctx(ctx, &p.value).ok())
+    .unwrap_or_default()
+}
+
 /// Type specified in RTPS v2.3 spec Figure 8.30
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DiscoveredReaderData {
@@ -418,11 +431,7 @@ impl PlCdrDeserialize for DiscoveredReaderData {
 
     let qos = QosPolicies::from_parameter_list(ctx, &pl_map)?;
 
-    let user_data = pl_map
-      .get(&ParameterId::PID_USER_DATA)
-      .and_then(|v| v.first())
-      .map(|p| p.value.clone())
-      .unwrap_or_default();
+    let user_data = user_data_octets(&pl_map, ctx);
 
     Ok(DiscoveredReaderData {
       reader_proxy: ReaderProxy::new(
@@ -498,7 +507,7 @@ impl ParameterListable for DiscoveredReaderData {
           security_info,
         },
       content_filter,
-      user_data: _,
+      user_data,
     } = self;
 
     let mut pl = ParameterList::new();
@@ -579,6 +588,11 @@ impl ParameterListable for DiscoveredReaderData {
       security_info,
       EndpointSecurityInfo
     );
+
+    // USER_DATA: a CDR sequence<octet>, sent when the endpoint has any.
+    if !user_data.is_empty() {
+      emit!(PID_USER_DATA, user_data, Vec<u8>);
+    }
 
     Ok(pl)
   }
@@ -810,7 +824,7 @@ impl DiscoveredWriterData {
       last_updated: Instant::now(),
       writer_proxy,
       publication_topic_data,
-      user_data: Vec::new(),
+      user_data: dp.endpoint_user_data(topic.get_type().name()),
     }
   }
 }
@@ -877,11 +891,7 @@ impl PlCdrDeserialize for DiscoveredWriterData {
 
     let qos = QosPolicies::from_parameter_list(ctx, &pl_map)?;
 
-    let user_data = pl_map
-      .get(&ParameterId::PID_USER_DATA)
-      .and_then(|v| v.first())
-      .map(|p| p.value.clone())
-      .unwrap_or_default();
+    let user_data = user_data_octets(&pl_map, ctx);
 
     Ok(DiscoveredWriterData {
       last_updated: Instant::now(),
@@ -956,7 +966,7 @@ impl ParameterListable for DiscoveredWriterData {
           #[cfg(feature = "security")]
           security_info,
         },
-      user_data: _,
+      user_data,
     } = self;
 
     let mut pl = ParameterList::new();
@@ -1032,6 +1042,11 @@ impl ParameterListable for DiscoveredWriterData {
       security_info,
       EndpointSecurityInfo
     );
+
+    // USER_DATA: a CDR sequence<octet>, sent when the endpoint has any.
+    if !user_data.is_empty() {
+      emit!(PID_USER_DATA, user_data, Vec<u8>);
+    }
 
     Ok(pl)
   }
