@@ -228,6 +228,25 @@ fn write_sample(
     Ok(())
 }
 
+/// Writes a sample of a topic beside the suite's on its channel (none yet: not written), unless
+/// it is one carried over from a dead recorder (transient-local topics deliver theirs again).
+fn write_foreign(
+    writer: &mut BagWriter<std::io::BufWriter<std::fs::File>>,
+    carried: &mut HashSet<SentKey>,
+    channels: &BTreeMap<String, u16>,
+    sample: ForeignSample,
+) -> anyhow::Result<()> {
+    let Some(id) = channels.get(&sample.topic) else {
+        return Ok(());
+    };
+    let sample = bag_file::suite::Sample {
+        channel_id: *id,
+        stamp: sample.stamp,
+        payload: sample.payload,
+    };
+    write_sample(writer, carried, sample)
+}
+
 /// Records `what` with `params` until the node is asked to stop, then finishes the bag;
 /// returns how many messages it holds.
 pub async fn run<B: Bus + 'static, D: Discover<B>>(
@@ -295,7 +314,8 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
     let stop = bus.shutdown_signal();
     tokio::pin!(stop);
     let mut flush = tokio::time::interval(Duration::from_secs_f64(params.flush_interval_s));
-    let mut foreign_channels: BTreeMap<String, u16> = BTreeMap::new();
+    // A topic carried over from a recorder that died keeps its channel when found again.
+    let mut foreign_channels: BTreeMap<String, u16> = channels.clone();
     loop {
         // Biased: what is ready is taken in this order, never by tokio's random pick, so a
         // run on the in-process bus is the same every time.
@@ -309,6 +329,9 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
                 }
                 // Topics beside the suite's: channels before their first samples are taken.
                 for t in beside.discover(bus).await {
+                    if foreign_channels.contains_key(&t.topic) {
+                        continue;
+                    }
                     let (schema, missing) = match &t.definition {
                         Ok(text) => (text.as_str(), None),
                         Err(why) => ("", Some(why.as_str())),
@@ -329,9 +352,7 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
                 write_sample(&mut writer, &mut carried, sample)?;
             }
             Some(sample) = next_foreign(&mut foreign) => {
-                if let Some(id) = foreign_channels.get(&sample.topic) {
-                    writer.write_cdr(*id, sample.stamp, &sample.payload)?;
-                }
+                write_foreign(&mut writer, &mut carried, &foreign_channels, sample)?;
             }
         }
     }
@@ -344,9 +365,7 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
     }
     if let Some(foreign) = &mut foreign {
         while let Ok(sample) = foreign.try_recv() {
-            if let Some(id) = foreign_channels.get(&sample.topic) {
-                writer.write_cdr(*id, sample.stamp, &sample.payload)?;
-            }
+            write_foreign(&mut writer, &mut carried, &foreign_channels, sample)?;
         }
     }
     for t in taps {

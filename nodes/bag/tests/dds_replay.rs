@@ -19,10 +19,16 @@ fn workspace() -> PathBuf {
     loopback_netns::workspace_root()
 }
 
-/// Payloads per topic, leaving out the heartbeats of the bag tools themselves.
+/// Payloads per topic, leaving out the heartbeats of the bag tools themselves and the ROS 2
+/// builtin topics.
 fn payloads(reader: &BagReader) -> BTreeMap<String, Vec<&RawMessage>> {
     let mut out: BTreeMap<String, Vec<&RawMessage>> = BTreeMap::new();
     for (c, m) in reader.iter() {
+        // `--all` records the graph's own topics too (the player's and recorder's log lines on
+        // /rosout, /parameter_events): not part of the played session.
+        if c.topic == "/rosout" || c.topic == "/parameter_events" {
+            continue;
+        }
         if c.topic == HEARTBEAT.name
             && bag_file::cdr::decode::<Heartbeat>(&m.data)
                 .is_ok_and(|h| h.node_name.starts_with("bag_"))
