@@ -3,6 +3,7 @@
 //!   policy_lab train --cluster 1 --transfer-from 0     (a Q-table file for the node)
 //!   policy_lab evaluate --bags bags --q-table NEW.json  (judge a policy on old sessions)
 //!   policy_lab per-child                               (leave-one-child-out adaptation)
+//!   policy_lab per-child-belief                        (the same with a belief about the child)
 //!   policy_lab supervision                             (supervised autonomy's rules, measured)
 //! The decision node itself, and a look at its Q-table files, is `behaviour_policy`.
 
@@ -36,6 +37,10 @@ enum Command {
     /// per-user table started from it, a table learned from scratch on the child and the
     /// optimal policy for the child's model, on the same draws, child by child.
     PerChild(commands::per_child::Args),
+    /// Per-child adaptation by a belief about the child (a posterior over known models, or
+    /// the child's own model), planned on before each sequence, beside `per-child`'s
+    /// policies on the same draws.
+    PerChildBelief(commands::per_child_belief::Args),
     /// Supervised autonomy's proposal rules on the study's children, leave one child out:
     /// proposals per session and the score a therapist who knows the child protects, against
     /// the policy alone and proposals at random at the same rate, paired by child.
@@ -51,6 +56,7 @@ fn main() -> anyhow::Result<()> {
         Command::Evaluate(a) => commands::evaluate::run(a),
         Command::EvaluateInSimulation(a) => commands::evaluate::run_in_simulation(a),
         Command::PerChild(a) => commands::per_child::run(a),
+        Command::PerChildBelief(a) => commands::per_child_belief::run(a),
         Command::Supervision(a) => commands::supervision::run(a),
     }
 }

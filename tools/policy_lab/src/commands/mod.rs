@@ -5,6 +5,7 @@ pub mod child_study;
 pub mod evaluate;
 pub mod experiments;
 pub mod per_child;
+pub mod per_child_belief;
 pub mod supervision;
 pub mod train;
 pub mod user_models;
