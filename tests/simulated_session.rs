@@ -593,7 +593,8 @@ echo "launch_exit=$?"
     assert_eq!(ids.len(), tasks.len(), "a task id sent twice: {tasks:?}");
 
     // Privacy: the bag holds the suite's features and events, never an image or a sound
-    // (ROS4HRI's list of tracked persons is ids only).
+    // (ROS4HRI's lists of persons are ids only; a person's topics say it is anonymous and its
+    // engagement level; `--all` records the graph's /rosout and /parameter_events too).
     let types: std::collections::BTreeSet<String> = reader
         .channels()
         .map(|c| c.type_name().to_string())
@@ -602,8 +603,11 @@ echo "launch_exit=$?"
         types.iter().all(|t| t.starts_with("qt_therapy_msgs/")
             || [
                 "std_msgs/msg/String",
+                "std_msgs/msg/Bool",
                 "rcl_interfaces/msg/Log",
-                "hri_msgs/msg/IdsList"
+                "rcl_interfaces/msg/ParameterEvent",
+                "hri_msgs/msg/IdsList",
+                "hri_msgs/msg/EngagementLevel"
             ]
             .contains(&t.as_str())),
         "unexpected types in the bag: {types:?}"

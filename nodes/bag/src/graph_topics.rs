@@ -11,9 +11,11 @@ use node_shell::NodeShell;
 use node_shell::foreign::RawSample;
 use qt_therapy_msgs::MessageDefinition;
 use qt_therapy_msgs::topics::QosKind;
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::time::Duration;
 use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
 
 /// How long the recorder waits for a publisher's type description.
 const DESCRIBE_TIMEOUT: Duration = Duration::from_secs(3);
@@ -22,10 +24,30 @@ const DESCRIBE_TIMEOUT: Duration = Duration::from_secs(3);
 /// the topic before the publisher's ros_discovery_info has arrived.
 const NODE_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// The graph's topics beside the suite's, found and tapped as they appear.
+/// How long a tapped topic stays tapped after discovery first reported it without a publisher
+/// (it is released at the first flush after that): a writer's samples reach its readers before
+/// its end is announced, so this only spares a publisher restarting at once a new reader.
+const RELEASE_AFTER: Duration = Duration::from_millis(500);
+
+/// One foreign topic being recorded.
+struct Tapped {
+    /// Its reader's task; aborting it drops the reader.
+    reader: JoinHandle<()>,
+    /// Since when discovery reports no publisher of it.
+    unpublished_since: Option<Instant>,
+}
+
+/// The graph's topics beside the suite's, found and tapped as they appear, and released once
+/// their publishers are gone: topics made per person (ROS4HRI's `/humans/persons/<id>/...`)
+/// come and go with every session, and a recorder running for a year must not hold a reader
+/// for each one it ever saw. A topic found again is tapped again into its channel.
 pub struct GraphTopics {
-    /// Topics recorded already (the suite's and those found).
-    known: HashSet<String>,
+    /// The suite's topics, recorded by their own taps.
+    suite: HashSet<String>,
+    /// Foreign topics tapped now.
+    tapped: BTreeMap<String, Tapped>,
+    /// Topics that could not be tapped (said once, not tried again).
+    refused: HashSet<String>,
     raw: mpsc::Sender<RawSample>,
 }
 
@@ -56,7 +78,9 @@ impl GraphTopics {
         });
         (
             GraphTopics {
-                known: recorded.into_iter().collect(),
+                suite: recorded.into_iter().collect(),
+                tapped: BTreeMap::new(),
+                refused: HashSet::new(),
                 raw,
             },
             rx,
@@ -107,16 +131,58 @@ fn qos_class(qos: &rustdds::QosPolicies) -> QosKind {
     }
 }
 
+impl GraphTopics {
+    /// Releases the readers of topics no publisher has offered for `RELEASE_AFTER`.
+    fn release_unpublished(&mut self, published: &HashSet<String>) {
+        let now = Instant::now();
+        self.tapped.retain(|name, tap| {
+            if published.contains(name) {
+                tap.unpublished_since = None;
+                return true;
+            }
+            let since = *tap.unpublished_since.get_or_insert(now);
+            if now.duration_since(since) < RELEASE_AFTER {
+                return true;
+            }
+            tap.reader.abort();
+            tracing::debug!(topic = %name, "no publisher left: reader released");
+            false
+        });
+    }
+
+    /// Topics recorded now, by the suite's taps or ours.
+    fn recorded(&self, name: &str) -> bool {
+        self.suite.contains(name) || self.tapped.contains_key(name) || self.refused.contains(name)
+    }
+}
+
 impl Discover<NodeShell> for GraphTopics {
     async fn discover(&mut self, shell: &mut NodeShell) -> Vec<ForeignTopic> {
-        let found = shell.foreign_topics(&|name| self.known.contains(name));
+        let published: HashSet<String> = shell
+            .foreign_topics(&|name| self.suite.contains(name))
+            .into_iter()
+            .map(|t| t.name)
+            .collect();
+        self.release_unpublished(&published);
+        let found = shell.foreign_topics(&|name| self.recorded(name));
         let mut out = Vec::new();
         for topic in found {
-            self.known.insert(topic.name.clone());
             // The tap first, so nothing is lost while the publisher is asked.
-            if let Err(e) = shell.tap_foreign(&topic, self.raw.clone()) {
-                tracing::warn!(topic = %topic.name, "cannot record: {e:#}");
-                continue;
+            match shell.tap_foreign(&topic, self.raw.clone()) {
+                Ok(reader) => {
+                    self.tapped.insert(
+                        topic.name.clone(),
+                        Tapped {
+                            reader,
+                            unpublished_since: None,
+                        },
+                    );
+                }
+                Err(e) => {
+                    tracing::warn!(topic = %topic.name, "cannot record: {e:#}");
+                    self.refused.insert(topic.name.clone());
+                    continue;
+                }
             }
             let mut topic = topic;
             if topic.publisher_node.is_none() && known_definition(&topic.type_name).is_none() {
