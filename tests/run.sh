@@ -17,6 +17,8 @@ command -v certutil >/dev/null || need_apt+=(libnss3-tools)
 command -v openssl >/dev/null || need_apt+=(openssl)
 [ -e /usr/include/openssl/ssl.h ] || need_apt+=(libssl-dev)
 command -v pkg-config >/dev/null || need_apt+=(pkg-config)
+# The clock-step test steps the nodes' wall clock with libfaketime.
+[ -e /usr/lib/x86_64-linux-gnu/faketime/libfaketimeMT.so.1 ] || need_apt+=(faketime)
 # The bag check's Python readers go into a venv: Debian's own python3 refuses `pip install`
 # into the system (PEP 668), and a venv needs ensurepip, which Debian ships apart.
 command -v python3 >/dev/null || need_apt+=(python3)
