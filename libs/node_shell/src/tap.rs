@@ -15,7 +15,8 @@ use tokio::sync::mpsc;
 #[derive(Debug, Clone)]
 pub struct Tapped<M> {
     pub message: M,
-    /// When this node took it from the bus (ns since the epoch, on the node's clock).
+    /// When it reached this node, on the node's steady clock (never stepped; a recorder's log
+    /// time): RustDDS's receive time, which the suite's patch keeps on that clock.
     pub received_ns: i64,
     /// When its publisher wrote it (ns since the epoch), if the sample carried a timestamp.
     pub source_timestamp_ns: Option<i64>,
@@ -62,7 +63,7 @@ impl NodeShell {
                             message,
                             received_ns: info
                                 .received_timestamp()
-                                .map_or_else(crate::clock::wall_nanos, |t| t.to_nanos()),
+                                .map_or_else(crate::clock::steady_nanos, |t| t.to_nanos()),
                             source_timestamp_ns: info.source_timestamp().map(|t| t.to_nanos()),
                             sequence_number: info.sequence_number(),
                             from_this_participant: info.publisher_gid().as_bytes()[..12]

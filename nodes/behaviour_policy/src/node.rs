@@ -112,7 +112,7 @@ pub async fn run(
             biased;
             _ = &mut stop => break,
             _ = clock.sleep_until(deadline.unwrap_or_default()), if deadline.is_some() => {
-                for e in gate.expired(clock.now_nanos()) {
+                for e in gate.expired(clock.steady_nanos()) {
                     tracing::warn!(session = %e.request.session_id, step = e.request.step,
                         "refused a decision: {}", e.reason);
                     e.call.respond(DecideActionResponse {
@@ -144,7 +144,7 @@ pub async fn run(
                 let learned = policies.last_learned(&call.request);
                 let request = call.request.clone();
                 let (session, after) = (request.session_id.clone(), request.after_sequence);
-                let Some((call, req)) = gate.request(call, request, learned, clock.now_nanos()) else {
+                let Some((call, req)) = gate.request(call, request, learned, clock.steady_nanos()) else {
                     tracing::info!(session = %session, "a decision request came before the \
                         result of sequence {after} it follows: held until it is learned");
                     continue;

@@ -184,6 +184,23 @@ impl SecondAggregator {
         self.close_until(watermark.div_euclid(SECOND_NS).max(next), emit);
     }
 
+    /// Message time jumped to `stamp_ns`: the clock that stamps the frames was stepped (NTP, a
+    /// clock set by hand). Every window still open is reported as it is, and counting starts
+    /// again at `stamp_ns`'s second. Without this, a step back left every later frame "late"
+    /// until the clock caught up, and a step forward reported the seconds skipped as seconds
+    /// without a face.
+    pub fn restart_at(&mut self, stamp_ns: i64, emit: &mut impl FnMut(&EngagementSecond)) {
+        self.flush(emit);
+        self.next_close = None;
+        self.latest_ns = i64::MIN;
+        let window = stamp_ns.div_euclid(SECOND_NS);
+        for s in &mut self.sources {
+            s.windows = [EMPTY; 2];
+            s.since_window = window;
+            s.last_frame_ns = stamp_ns;
+        }
+    }
+
     /// End of stream: report every window that holds a frame.
     pub fn flush(&mut self, emit: &mut impl FnMut(&EngagementSecond)) {
         if self.latest_ns != i64::MIN {

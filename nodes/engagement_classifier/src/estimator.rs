@@ -144,6 +144,12 @@ impl EngagementEstimator {
         self.aggregator.advance_to(stamp_ns, emit);
     }
 
+    /// The frames' clock was stepped to `stamp_ns`: the open seconds are reported and counting
+    /// starts again there (`SecondAggregator::restart_at`).
+    pub fn restart_at(&mut self, stamp_ns: i64, emit: &mut impl FnMut(&EngagementSecond)) {
+        self.aggregator.restart_at(stamp_ns, emit);
+    }
+
     /// End of the stream: report the seconds still open.
     pub fn flush(&mut self, emit: &mut impl FnMut(&EngagementSecond)) {
         self.aggregator.flush(emit);

@@ -2,13 +2,16 @@
 //! in the cross-node tests). OpenFace frames in; per frame an `EngagementEstimate`, per second
 //! of message time and source an `ExpectedEngagement` out, and with `ros4hri` the same second
 //! as a ROS4HRI person's topics (REP-155). All logic is in `EngagementEstimator` and
-//! `ros4hri::PersonEngagement`; the conversion of messages is `messages::Sources`.
+//! `ros4hri::PersonEngagement`; the conversion of messages is `messages::Sources`. When the
+//! machine's wall clock is stepped, the frames' stamps jump with it: `FramesClock` tells such a
+//! jump from a late or stalled frame, and the seconds are counted again from the new time.
 
 use crate::messages::Sources;
 use crate::ros4hri::{HriOutput, PersonEngagement};
 use crate::{EngagementClassifierParams, EngagementEstimator, EngagementSecond, FrameOutcome};
 use anyhow::Context;
-use node_shell::{Bus, Outbox};
+use clock_steps::ClockSteps;
+use node_shell::{Bus, Clock, Outbox};
 use qt_therapy_msgs::hri_msgs::{EngagementLevel, IdsList};
 use qt_therapy_msgs::std_msgs::BoolMsg;
 use qt_therapy_msgs::topics::{
@@ -64,6 +67,8 @@ pub async fn run<B: Bus>(
         closed: Vec::with_capacity(16),
     };
     let drops = bus.drops();
+    let clock = bus.clock();
+    let mut frames_clock = FramesClock::default();
     // Message time runs on between frames at the clock's pace, so a camera that stops
     // still gets its last seconds reported.
     let mut last_stamp: Option<(i64, Instant)> = None;
@@ -81,6 +86,12 @@ pub async fn run<B: Bus>(
                 let face = out.sources.face_frame(&frame);
                 let stamp_ns = face.stamp_ns;
                 let closed = &mut out.closed;
+                let expected = last_stamp.map(|(stamp, at)| stamp + at.elapsed().as_nanos() as i64);
+                if let Some(by) = frames_clock.stepped(read(&clock), stamp_ns, expected) {
+                    tracing::warn!("the frames' clock stepped {:+.3} s with this machine's: \
+                        the open seconds are reported and counting starts again", by as f64 * 1e-9);
+                    estimator.restart_at(stamp_ns, &mut |s| closed.push(*s));
+                }
                 match estimator.on_frame(&face, &mut |s| closed.push(*s)) {
                     Ok(outcome) => {
                         let (label, probability) = match outcome {
@@ -97,6 +108,7 @@ pub async fn run<B: Bus>(
                 out.publish(bus);
             }
             _ = tick.tick() => {
+                frames_clock.read(read(&clock));
                 if let Some((stamp, at)) = last_stamp {
                     let now = stamp + at.elapsed().as_nanos() as i64;
                     let closed = &mut out.closed;
@@ -189,6 +201,98 @@ impl Ros4Hri {
                     }
                 }
             }
+        }
+    }
+}
+
+/// Whether a frame's stamp jumped because this machine's wall clock was stepped. The node
+/// follows its own clocks (`ClockSteps`); a step of them is pending until a frame comes
+/// stamped that far from where message time would be (the camera's clock, on the same
+/// machine, stepped with it). Frames stamped before the step and received after it, late
+/// frames, and a camera that stalled and catches up keep the seconds as they are.
+#[derive(Debug, Default)]
+struct FramesClock {
+    own: ClockSteps,
+    /// This machine's steps not yet seen in the frames' stamps, added up.
+    pending_ns: i64,
+}
+
+/// How close a frame's jump must come to the machine's step to be it: frames arrive within
+/// milliseconds of their stamps, and message time runs on between them.
+const STEP_MATCH_NS: i64 = 2_000_000_000;
+
+/// The node's steady and wall clocks, read together.
+fn read(clock: &Clock) -> (i64, i64) {
+    (clock.steady_nanos(), clock.now_nanos())
+}
+
+impl FramesClock {
+    /// This machine's clocks read as (steady, wall).
+    fn read(&mut self, (steady_ns, wall_ns): (i64, i64)) {
+        if let Some(step) = self.own.observe(steady_ns, wall_ns) {
+            self.pending_ns += step.by_ns;
+        }
+    }
+
+    /// A frame stamped `stamp_ns`, where message time would be `expected_ns`, received when
+    /// the clocks read `clocks`: the step it shows, if it is one.
+    fn stepped(
+        &mut self,
+        clocks: (i64, i64),
+        stamp_ns: i64,
+        expected_ns: Option<i64>,
+    ) -> Option<i64> {
+        self.read(clocks);
+        let expected_ns = expected_ns?;
+        let jump = stamp_ns - expected_ns;
+        // A jump within a second is a frame the seconds take as it is (late or early).
+        if jump.abs() <= STEP_MATCH_NS / 2 || (jump - self.pending_ns).abs() > STEP_MATCH_NS {
+            return None;
+        }
+        self.pending_ns = 0;
+        Some(jump)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: i64 = 1_000_000_000;
+    const T0: i64 = 1_780_000_000 * S;
+
+    #[test]
+    fn a_jump_of_the_frames_is_a_step_only_when_this_machine_stepped_that_far() {
+        for by in [-3600 * S, 7200 * S] {
+            let mut c = FramesClock::default();
+            c.read((T0, T0));
+            // Frames every 33 ms, on time.
+            assert_eq!(
+                c.stepped((T0 + S, T0 + S), T0 + S, Some(T0 + S - S / 100)),
+                None
+            );
+            // A camera that stalled 6 s and catches up, and a late frame: no step.
+            assert_eq!(
+                c.stepped((T0 + 8 * S, T0 + 8 * S), T0 + 2 * S, Some(T0 + 8 * S)),
+                None
+            );
+            // The machine steps; a frame stamped before it, received after it: as it is.
+            let after = (T0 + 9 * S, T0 + 9 * S + by);
+            assert_eq!(
+                c.stepped(after, T0 + 9 * S - S / 50, Some(T0 + 9 * S)),
+                None
+            );
+            // The first frame stamped by the stepped clock.
+            assert_eq!(
+                c.stepped(after, T0 + 9 * S + by, Some(T0 + 9 * S)),
+                Some(by)
+            );
+            // Then frames follow again.
+            let later = (T0 + 10 * S, T0 + 10 * S + by);
+            assert_eq!(
+                c.stepped(later, T0 + 10 * S + by, Some(T0 + 10 * S + by)),
+                None
+            );
         }
     }
 }

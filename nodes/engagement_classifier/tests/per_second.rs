@@ -139,6 +139,50 @@ fn a_source_that_stops_sending_retires_after_the_timeout() {
 }
 
 #[test]
+fn a_step_of_the_frames_clock_restarts_the_seconds_and_loses_none() {
+    for by in [-3600 * S, 7200 * S] {
+        let mut agg = SecondAggregator::new(config());
+        let mut out = Vec::new();
+        let mut emit = |s: &EngagementSecond| out.push(*s);
+        // 10 frames a second over seconds 100..103, then the clock steps mid-second 103.
+        for k in 0..35 {
+            agg.add(0, 100 * S + k * S / 10, Some(1), &mut emit)
+                .expect("on time");
+        }
+        // Without a restart a step back makes every later frame late.
+        if by < 0 {
+            let err = agg.add(0, 103 * S + S / 2 + by, Some(-1), &mut emit);
+            assert!(matches!(err, Err(AggregateError::LateFrame { .. })));
+        }
+        agg.restart_at(103 * S + S / 2 + by, &mut emit);
+        for k in 0..25 {
+            agg.add(0, 103 * S + S / 2 + by + k * S / 10, Some(-1), &mut emit)
+                .expect("counted after the restart");
+        }
+        agg.flush(&mut emit);
+        // Seconds 100..102 whole and 103 cut at the step, then 103+by (from the half
+        // second on), 104+by and 105+by: every frame in one second, once.
+        assert_eq!(
+            out.iter()
+                .map(|s| (s.window_start_ns, s.frame_count()))
+                .collect::<Vec<_>>(),
+            vec![
+                (100 * S, 10),
+                (101 * S, 10),
+                (102 * S, 10),
+                (103 * S, 5),
+                (103 * S + by, 5),
+                (104 * S + by, 10),
+                (105 * S + by, 10),
+            ],
+            "{by}"
+        );
+        // No second of the gap a forward step skipped is reported as one without a face.
+        assert!(out.iter().all(|s| s.engagement.is_some()), "{by}");
+    }
+}
+
+#[test]
 fn too_many_sources_is_an_error_value() {
     let mut agg = SecondAggregator::new(AggregatorConfig {
         max_sources: 2,

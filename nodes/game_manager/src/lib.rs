@@ -17,4 +17,4 @@ pub mod utterances;
 
 pub use game::GameManager;
 pub use params::{GameManagerParams, ParamError};
-pub use protocol::{Input, LogLevel, Output};
+pub use protocol::{Input, LogLevel, Now, Output};

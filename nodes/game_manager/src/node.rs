@@ -10,7 +10,7 @@ pub mod robot;
 
 use crate::recovery::{self, RecoveredSession};
 use crate::session_file::SessionFiles;
-use crate::{GameManager, GameManagerParams, Input, LogLevel, Output};
+use crate::{GameManager, GameManagerParams, Input, LogLevel, Now, Output};
 use anyhow::Context as _;
 use node_shell::{Bus, Clock, Outbox};
 use qt_therapy_msgs::topics::{
@@ -95,7 +95,7 @@ pub async fn run(
     if let Some(reason) = &unheard {
         tracing::warn!("{reason}");
     }
-    // (due time, timer id) of the timers the core asked for.
+    // (due time on the steady clock, timer id) of the timers the core asked for.
     let mut timers: BTreeSet<(i64, u64)> = BTreeSet::new();
     if params.timing.policy_startup_wait_s > 0.0 {
         let wait = Duration::from_secs_f64(params.timing.policy_startup_wait_s);
@@ -118,8 +118,8 @@ pub async fn run(
     tracing::info!(sessions_dir = %params.files.sessions_dir, language = %params.lines.language,
         time_scale = params.timing.time_scale, "game manager ready");
 
-    let now = clock.now_nanos();
-    let initial = match recovered_session(&mut core, &files, &params, now) {
+    let now = Now::of(&clock);
+    let initial = match recovered_session(&mut core, &files, &params, now.steady_ns) {
         Some(r) => {
             tracing::warn!(session = %r.session_id, stem = %r.stem, sequences = r.records.len(),
                 "taking over a session left unfinished");
@@ -139,7 +139,7 @@ pub async fn run(
     };
     ctx.apply(initial);
     if let Some(reason) = unheard {
-        ctx.apply(core.handle(Input::RobotUnheard { reason }, clock.now_nanos()));
+        ctx.apply(core.handle(Input::RobotUnheard { reason }, Now::of(&clock)));
     }
     let stop = bus.shutdown_signal();
     tokio::pin!(stop);
@@ -150,7 +150,7 @@ pub async fn run(
         let input = tokio::select! {
             biased;
             _ = &mut stop => {
-                let outputs = core.handle(Input::Shutdown { reason: "node shut down (signal)".into() }, clock.now_nanos());
+                let outputs = core.handle(Input::Shutdown { reason: "node shut down (signal)".into() }, Now::of(&clock));
                 ctx.apply(outputs);
                 break;
             }
@@ -172,7 +172,7 @@ pub async fn run(
             sequence = core.sequence_index()
         );
         let _entered = span.enter();
-        let outputs = core.handle(input, clock.now_nanos());
+        let outputs = core.handle(input, Now::of(&clock));
         ctx.apply(outputs);
     }
     Ok(())
@@ -253,7 +253,7 @@ impl Dispatch<'_> {
                     let client = self.policy.clone();
                     let tx = self.decided.clone();
                     // The core falls back at the deadline itself; this only bounds the call.
-                    let left = deadline_ns.saturating_sub(self.clock.now_nanos());
+                    let left = deadline_ns.saturating_sub(self.clock.steady_nanos());
                     let timeout = Duration::from_nanos(u64::try_from(left).unwrap_or(0))
                         + Duration::from_millis(500);
                     tokio::spawn(async move {

@@ -1,13 +1,43 @@
 //! What goes into and comes out of the game manager's core: messages (heartbeats among them),
 //! service answers and timer firings in; robot acts, tablet tasks, game states, results,
-//! service requests, timer requests, session-file records and log lines out. Time is message
-//! time in nanoseconds.
+//! service requests, timer requests, session-file records and log lines out. Time is given as
+//! both clocks' readings ([`Now`]); the core keeps every time of its own, timers included, on
+//! the steady one.
 
 use crate::session_file::{JournalEntry, SequenceRecord, SessionSummary};
 use qt_therapy_msgs::{
     ActionProposal, DecideActionRequest, DecideActionResponse, ExpectedEngagement, GameState,
     Heartbeat, SequenceResult, TabletAnswer, TabletTask, TherapistCommand,
 };
+
+/// The time of an input, in nanoseconds since the epoch: the steady clock, which never steps
+/// (timers, durations, the session's times, engagement periods), and the wall clock, which
+/// stamps the messages (docs/contract.md, "Time"), read together (`node_shell::Clock`). A replay
+/// or a test gives one reading for both (`From<i64>`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Now {
+    pub steady_ns: i64,
+    pub wall_ns: i64,
+}
+
+impl From<i64> for Now {
+    fn from(t: i64) -> Now {
+        Now {
+            steady_ns: t,
+            wall_ns: t,
+        }
+    }
+}
+
+impl Now {
+    /// Both clocks of `clock`, now.
+    pub fn of(clock: &node_shell::Clock) -> Now {
+        Now {
+            steady_ns: clock.steady_nanos(),
+            wall_ns: clock.now_nanos(),
+        }
+    }
+}
 
 /// One event for the core.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,4 +1,4 @@
-//! The bridge's core: OpenFace CSV lines in (with their line number and the wall clock),
+//! The bridge's core: OpenFace CSV lines in (with their line number and the node's clock),
 //! `OpenFaceFeatures` messages (each with the time it may be published) and log lines out. A
 //! header line starts a run (OpenFace started writing a file); each row after it becomes one
 //! message, or is skipped and counted: a lost face (`success` 0), a confidence below the
@@ -6,7 +6,7 @@
 //! too long, each kind named once with its line number), a (face, frame) read already in this
 //! run, or a backlog row too old to matter.
 //!
-//! Stamps (`stamp: openface`): OpenFace's timestamp plus the run's offset to the wall clock,
+//! Stamps (`stamp: openface`): OpenFace's timestamp plus the run's offset to the node's clock,
 //! estimated as the smallest lag seen between a row's OpenFace time and the time it was read (a
 //! row is never read before it was written), taken over a whole read before any row of it is
 //! stamped. So a stamp is never ahead of the clock, rows keep OpenFace's spacing, and a backlog
@@ -14,6 +14,11 @@
 //! belongs. Publication is paced: never faster than `max_publish_hz` (a burst after a stall or
 //! a backlog would overflow a best-effort reader's queue), and with `replay_rate` a finished
 //! recording is published on OpenFace's own clock (times the rate), each stamped when it is due.
+//!
+//! The core's clock is the node's steady clock, which a step of the wall clock does not move:
+//! pacing and the offset above stay right when NTP or someone steps the wall clock. Its stamps
+//! are on that clock too; the node adds the wall clock's offset from it as it publishes, so
+//! what goes out is stamped by the wall clock.
 //!
 //! OpenFace rewrites its whole CSV when it ends (post-processed action units): after the file
 //! restarts, its first rows are held until they tell a rewrite (the previous run's frames with
@@ -124,7 +129,7 @@ struct Run {
     last_timestamp: Option<f64>,
     /// The last stamp given, so stamps never go back within a run.
     last_stamp_ns: i64,
-    /// (OpenFace timestamp, wall clock ns) a replay is timed from.
+    /// (OpenFace timestamp, ns on the core's clock) a replay is timed from.
     replay_anchor: Option<(f64, i64)>,
 }
 
@@ -196,7 +201,7 @@ pub struct Bridge {
     deciding: Option<Deciding>,
     /// Rows taken since the last `end_of_read`, to be stamped together.
     pending: Vec<Row>,
-    /// Messages stamped and waiting for their time (wall clock ns).
+    /// Messages stamped and waiting for their time (ns on the core's clock).
     queue: VecDeque<(i64, OpenFaceFeatures)>,
     last_due_ns: Option<i64>,
     /// When `due` last handed a message out.
@@ -302,7 +307,7 @@ impl Bridge {
         out
     }
 
-    /// One line of the CSV (without its newline), read at wall clock `now_ns`. A header that
+    /// One line of the CSV (without its newline), read at `now_ns`. A header that
     /// lacks a needed column is an error: OpenFace runs with the wrong outputs. Rows taken
     /// wait for `end_of_read`.
     pub fn line(
@@ -364,7 +369,7 @@ impl Bridge {
         Ok(out)
     }
 
-    /// The end of one read of the file or the pipe, at wall clock `now_ns`: the rows taken
+    /// The end of one read of the file or the pipe, at `now_ns`: the rows taken
     /// since the last one are stamped together and queued for publication.
     pub fn end_of_read(&mut self, now_ns: i64) -> Vec<LogLine> {
         let mut out = Vec::new();
@@ -408,7 +413,7 @@ impl Bridge {
         out
     }
 
-    /// When the next queued message may go out (wall clock ns).
+    /// When the next queued message may go out (ns on the core's clock).
     pub fn next_due_ns(&self) -> Option<i64> {
         let (due, _) = self.queue.front()?;
         Some(match self.last_sent_ns {

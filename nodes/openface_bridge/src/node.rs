@@ -6,6 +6,7 @@ use crate::{Bridge, FollowEvent, Follower, LogLine, OpenFaceBridgeParams};
 use anyhow::{Context, bail};
 use node_shell::Bus;
 use node_shell::logging::log_at;
+use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::topics::OPENFACE_FEATURES;
 use std::io::{BufRead, Read as _};
 use std::path::PathBuf;
@@ -106,7 +107,7 @@ pub async fn run(
                             for event in events {
                                 let logs = match event {
                                     FollowEvent::Line { text, line_no } => bridge
-                                        .line(&text, line_no, clock.now_nanos())
+                                        .line(&text, line_no, clock.steady_nanos())
                                         .with_context(|| format!("{source}, line {line_no}"))?,
                                     FollowEvent::TooLong { line_no } => bridge.too_long(line_no),
                                     FollowEvent::Restarted { why } => bridge.restarted(why),
@@ -129,13 +130,16 @@ pub async fn run(
                         Err(_) => break,
                     }
                 }
-                for LogLine(level, line) in bridge.end_of_read(clock.now_nanos()) {
+                for LogLine(level, line) in bridge.end_of_read(clock.steady_nanos()) {
                     log_at(level, &line);
                 }
             }
         }
         if reader_ready {
-            for m in bridge.due(clock.now_nanos()) {
+            // The core stamps on the steady clock; what goes out is on the wall clock.
+            let wall_offset = clock.now_nanos() - clock.steady_nanos();
+            for mut m in bridge.due(clock.steady_nanos()) {
+                m.header.stamp = Time::from_nanos(m.header.stamp.to_nanos() + wall_offset);
                 if !frames.send(m) {
                     not_sent += 1;
                 }

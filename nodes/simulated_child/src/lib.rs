@@ -9,6 +9,10 @@
 //! answer of a sequence by its session and index, a camera frame by its index on the child's
 //! frame clock. So the same seed and the same game give the same answers however many frames a
 //! loaded machine let the child publish in between.
+//!
+//! Its times (`now_ns`, the frame clock, answer delays) are the node's steady clock, which a
+//! step of the wall clock does not move; what it stamps (frames, answers) is on the wall clock,
+//! that time plus the wall clock's offset ([`SimulatedChild::set_wall_offset`]).
 
 /// The child's run loop on a bus (DDS or in process).
 pub mod node;
@@ -208,6 +212,8 @@ pub struct SimulatedChild {
     next_frame: u64,
     /// The last frame put out, if any.
     last_frame: Option<u64>,
+    /// The wall clock minus the steady clock, added to every stamp (0: one clock).
+    wall_offset_ns: i64,
 }
 
 impl SimulatedChild {
@@ -253,6 +259,7 @@ impl SimulatedChild {
             target_engagement: 0.0,
             looking: true,
             frame_origin_ns: None,
+            wall_offset_ns: 0,
             next_frame: 0,
             last_frame: None,
         })
@@ -323,6 +330,12 @@ impl SimulatedChild {
             }
             self.heard.push_back(e);
         }
+    }
+
+    /// The wall clock's offset from the steady clock now (wall - steady): what the stamps add
+    /// to the child's times. The node sets it before each `poll`.
+    pub fn set_wall_offset(&mut self, wall_minus_steady_ns: i64) {
+        self.wall_offset_ns = wall_minus_steady_ns;
     }
 
     /// A task on the tablet: answer it once, after a delay.
@@ -403,7 +416,7 @@ impl SimulatedChild {
             }
         }
         TabletAnswer {
-            header: Header::at(Time::from_nanos(pending.due)),
+            header: Header::at(Time::from_nanos(pending.due + self.wall_offset_ns)),
             session_id: task.session_id.clone(),
             sequence_id: task.sequence_id,
             answer: answer.iter().map(|e| e.name().to_string()).collect(),
@@ -500,7 +513,7 @@ impl SimulatedChild {
         }
         self.last_frame = Some(n);
         let header = Header {
-            stamp: Time::from_nanos(stamp_ns),
+            stamp: Time::from_nanos(stamp_ns + self.wall_offset_ns),
             frame_id: self.params.camera_frame.clone(),
         };
         if draws.lost < self.params.face_lost_rate {

@@ -42,9 +42,11 @@ pub async fn run(bus: &mut impl Bus, params: ChildParams) -> anyhow::Result<()> 
             _ = &mut stop => break,
             Some(s) = states.recv() => child.on_game_state(&s),
             Some(e) = emotions.recv() => child.on_robot_emotion(&e.data),
-            Some(t) = tasks.recv() => child.on_task(&t, clock.now_nanos()),
+            Some(t) = tasks.recv() => child.on_task(&t, clock.steady_nanos()),
             _ = tick.tick() => {
-                for out in child.poll(clock.now_nanos()) {
+                let steady = clock.steady_nanos();
+                child.set_wall_offset(clock.now_nanos() - steady);
+                for out in child.poll(steady) {
                     match out {
                         ChildOutput::Frame(f) => { frames.send(f); }
                         ChildOutput::Answer(a) => {

@@ -98,11 +98,19 @@ impl Commands {
                         GameState::phase_name(g.phase)
                     ));
                 }
-                let base = format!("tablet-{}", now.wall_nanos / 1_000_000);
-                Ok(match &self.current_session {
-                    // Two starts within one millisecond still get two sessions.
-                    Some(s) if s.starts_with(&base) => format!("{base}-{}", now.wall_nanos),
-                    _ => base,
+                // The wall clock's millisecond, past the last session's when that was made
+                // here too: after a step back of the clock, a millisecond of the repeated
+                // time could name a session the game manager has had (it refuses the START).
+                let millis = now.wall_nanos / 1_000_000;
+                let last = self
+                    .current_session
+                    .as_deref()
+                    .and_then(|s| s.strip_prefix("tablet-"))
+                    .and_then(|rest| rest.split('-').next())
+                    .and_then(|m| m.parse::<i64>().ok());
+                Ok(match last {
+                    Some(l) if l >= millis => format!("tablet-{}", l.saturating_add(1)),
+                    _ => format!("tablet-{millis}"),
                 })
             }
             // An emergency stop goes out even when no session is known: it costs nothing.

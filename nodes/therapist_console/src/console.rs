@@ -61,6 +61,10 @@ pub struct Console<'a, B: Bus> {
     decisions: Receiver<Decision>,
     proposals: Receiver<ActionProposal>,
     say: Box<dyn FnMut(&str) + Send + 'a>,
+    /// The last command id sent: ids only increase, even when the wall clock steps back.
+    last_command_id: std::cell::Cell<u64>,
+    /// The newest session id of this console or of the game manager's last state.
+    last_session: Option<String>,
 }
 
 /// What the game manager did with a command.
@@ -85,6 +89,19 @@ pub fn answer_to(c: &TherapistCommand, s: &GameState) -> Option<Answer> {
     }
 }
 
+/// The session id a START gets when none is given: `session-<seconds since the epoch>`, past
+/// `last` (the console's previous one, or the game manager's last session) when that has the
+/// same form, so a step back of the wall clock does not make an id the game manager has used
+/// (it would refuse the START).
+pub fn default_session_id(now_s: i64, last: Option<&str>) -> String {
+    let last_s = last
+        .and_then(|id| id.strip_prefix("session-"))
+        .map(|rest| rest.split('-').next().unwrap_or(rest))
+        .and_then(|digits| digits.parse::<i64>().ok());
+    let s = last_s.map_or(now_s, |l| now_s.max(l.saturating_add(1)));
+    format!("session-{s}")
+}
+
 /// The phase in words (`saying sequence`).
 pub fn phase_name(phase: u8) -> String {
     GameState::phase_name(phase).replace('_', " ")
@@ -107,18 +124,24 @@ impl<'a, B: Bus> Console<'a, B> {
             decisions,
             proposals,
             say: Box::new(say),
+            last_command_id: std::cell::Cell::new(0),
+            last_session: None,
         })
     }
 
     /// A command of `kind` for `session`; command ids only increase: milliseconds on the
-    /// bus's clock.
+    /// bus's wall clock, past the id before even when that clock steps back (the game manager
+    /// refuses an id at or below the last it carried out).
     pub fn command(&self, kind: u8, session: &str) -> TherapistCommand {
         let clock = self.bus.clock();
+        let millis = (clock.now_nanos() / 1_000_000).max(1) as u64;
+        let command_id = millis.max(self.last_command_id.get() + 1);
+        self.last_command_id.set(command_id);
         TherapistCommand {
             header: clock.header_now(),
             command: kind,
             session_id: session.to_string(),
-            command_id: (clock.now_nanos() / 1_000_000).max(1) as u64,
+            command_id,
             ..Default::default()
         }
     }
@@ -174,20 +197,26 @@ impl<'a, B: Bus> Console<'a, B> {
         check: bool,
     ) -> anyhow::Result<TherapistCommand> {
         if check {
-            self.check_free(a).await?;
+            let state = self.check_free(a).await?;
+            if !state.session_id.is_empty() {
+                self.last_session = Some(state.session_id);
+            }
         }
-        let session = a
-            .session
-            .clone()
-            .unwrap_or_else(|| format!("session-{}", self.bus.clock().now_nanos() / 1_000_000_000));
+        let session = a.session.clone().unwrap_or_else(|| {
+            default_session_id(
+                self.bus.clock().now_nanos() / 1_000_000_000,
+                self.last_session.as_deref(),
+            )
+        });
+        self.last_session = Some(session.clone());
         let mut c = self.command(TherapistCommand::START, &session);
         c.user_id = a.user.clone();
         c.user_model_cluster = a.cluster;
         Ok(c)
     }
 
-    /// Fails when no game manager answers or it is busy with a session.
-    async fn check_free(&mut self, a: &Start) -> anyhow::Result<()> {
+    /// Fails when no game manager answers or it is busy with a session; its state otherwise.
+    async fn check_free(&mut self, a: &Start) -> anyhow::Result<GameState> {
         // The game state is transient-local: a running game manager's last state arrives at
         // once.
         let state = tokio::time::timeout(a.wait, self.states.recv())
@@ -202,16 +231,12 @@ impl<'a, B: Bus> Console<'a, B> {
             .context("game state channel closed")?;
         // RustDDS hands a new transient-local reader every sample its writer still keeps for
         // a reader that has not acknowledged it yet (e.g. the console of the session before,
-        // just gone), oldest first: the game's state now is the newest that arrives in a
-        // short while.
+        // just gone), oldest first: the game's state now is the last that arrives in a short
+        // while. (Not the newest stamp: a step back of the wall clock stamps it older.)
         let mut state = state;
         let settle = Instant::now() + Duration::from_millis(500);
         while let Ok(Some(s)) = tokio::time::timeout_at(settle, self.states.recv()).await {
-            if (s.header.stamp.sec, s.header.stamp.nanosec)
-                >= (state.header.stamp.sec, state.header.stamp.nanosec)
-            {
-                state = s;
-            }
+            state = s;
         }
         if !matches!(
             GamePhase::try_from(state.phase),
@@ -226,7 +251,7 @@ impl<'a, B: Bus> Console<'a, B> {
                 state.phase
             );
         }
-        Ok(())
+        Ok(state)
     }
 
     /// Starts `follow.sessions` sessions one after the other and follows each to its end;
@@ -274,6 +299,7 @@ impl<'a, B: Bus> Console<'a, B> {
             decisions,
             proposals: proposal_messages,
             say,
+            ..
         } = self;
         let clock = bus.clock();
         let carry_out = |events: Vec<proposals::Event>, say: &mut dyn FnMut(&str)| {
@@ -430,6 +456,42 @@ mod tests {
             status: status.into(),
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_default_session_id_comes_after_the_last_one_when_the_clock_stepped_back() {
+        assert_eq!(default_session_id(1000, None), "session-1000");
+        assert_eq!(
+            default_session_id(1000, Some("session-900")),
+            "session-1000"
+        );
+        // An hour back: past the last session instead of one the game manager may have had.
+        assert_eq!(
+            default_session_id(1000, Some("session-4600")),
+            "session-4601"
+        );
+        assert_eq!(
+            default_session_id(1000, Some("session-4600-00003")),
+            "session-4601"
+        );
+        assert_eq!(
+            default_session_id(1000, Some("tablet-4600000")),
+            "session-1000"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn command_ids_only_increase_on_one_console() {
+        let bus = node_shell::in_process::InProcessBus::new(node_shell::Clock::starting_at(
+            1_000_000_000_000,
+        ));
+        let (mut node, _stop) = bus.join("therapist_console").expect("joins");
+        let console = Console::new(&mut node, |_: &str| {}).expect("console");
+        // The clock stands still: three commands within one millisecond.
+        let ids: Vec<u64> = (0..3)
+            .map(|_| console.command(TherapistCommand::PAUSE, "s1").command_id)
+            .collect();
+        assert!(ids.windows(2).all(|w| w[1] > w[0]), "{ids:?}");
     }
 
     #[test]

@@ -369,7 +369,7 @@ impl Bus for InProcessNode {
                 let d = inbox.pop().await;
                 let tapped = Tapped {
                     message: d.message,
-                    received_ns: clock.now_nanos(),
+                    received_ns: clock.steady_nanos(),
                     source_timestamp_ns: Some(d.published_ns),
                     sequence_number: d.sequence,
                     from_this_participant: d.instance == own,

@@ -23,14 +23,15 @@ mod watch;
 pub use session::RECOVERED_STATUS;
 
 use crate::params::{GameManagerParams, ParamError};
-use crate::protocol::{Input, LogLevel, Output};
+use crate::protocol::{Input, LogLevel, Now, Output};
 use crate::sequence::SessionRng;
 use crate::session_file::SessionEnd;
 use crate::utterances::Utterances;
+use clock_steps::ClockSteps;
 use heartbeat_watch::{HeartbeatWatch, Twins};
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
-use qt_therapy_msgs::{GameState, SequenceResult};
+use qt_therapy_msgs::{ExpectedEngagement, GameState, SequenceResult};
 use sequence_game::{Action, Emotion, Feedback, Level, State};
 use session_tally::EngagementLog;
 use std::collections::BTreeSet;
@@ -157,6 +158,9 @@ pub struct GameManager {
     robot: robot::RobotSteps,
     /// Supervised autonomy's proposals (`propose.rs`).
     proposals: propose::ProposalDesk,
+    /// The wall clock's offset from the steady clock, and its steps: every time the core keeps
+    /// is steady, and is stamped by the wall clock's offset now.
+    clock: ClockSteps,
     out: Vec<Output>,
 }
 
@@ -195,6 +199,7 @@ impl GameManager {
             answered: CommandAnswer::default(),
             robot,
             proposals,
+            clock: ClockSteps::new(),
             out: Vec::new(),
         })
     }
@@ -204,7 +209,8 @@ impl GameManager {
     }
 
     /// The first state to publish (transient-local, so consoles see an idle game at once).
-    pub fn initial_outputs(&mut self, now: i64) -> Vec<Output> {
+    pub fn initial_outputs(&mut self, now: impl Into<Now>) -> Vec<Output> {
+        let now = self.read_clocks(now.into());
         self.publish_state(now);
         std::mem::take(&mut self.out)
     }
@@ -223,13 +229,15 @@ impl GameManager {
         !matches!(self.phase, Phase::Idle | Phase::Ended(_))
     }
 
-    /// Feeds one input at message time `now` (ns); returns what to do, in order.
-    pub fn handle(&mut self, input: Input, now: i64) -> Vec<Output> {
+    /// Feeds one input at `now`; returns what to do, in order.
+    pub fn handle(&mut self, input: Input, now: impl Into<Now>) -> Vec<Output> {
+        let now = self.read_clocks(now.into());
         match input {
             Input::Command(c) => self.on_command(c, now),
             Input::Answer(a) => self.on_answer(a, now),
             Input::Engagement(e) => {
                 if self.session_running() {
+                    let e = self.on_steady_clock(e, now);
                     self.engagement.push(&e);
                 }
             }
@@ -261,6 +269,39 @@ impl GameManager {
         }
         self.settle_robot();
         std::mem::take(&mut self.out)
+    }
+
+    /// Follows the wall clock's offset from the steady clock (a step is logged); returns the
+    /// steady time, on which the core keeps every time.
+    fn read_clocks(&mut self, now: Now) -> i64 {
+        if let Some(step) = self.clock.observe(now.steady_ns, now.wall_ns) {
+            self.log(
+                LogLevel::WARN,
+                format!(
+                    "the wall clock stepped {:+.3} s: timers and the session's times go on by \
+                     the steady clock, stamps follow the wall clock",
+                    step.by_ns as f64 * 1e-9
+                ),
+            );
+        }
+        now.steady_ns
+    }
+
+    /// A stamp for steady time `steady_ns`: the wall clock's reading for it now.
+    fn stamp(&self, steady_ns: i64) -> Time {
+        Time::from_nanos(self.clock.wall_of(steady_ns))
+    }
+
+    /// A second of engagement, stamped by the classifier's wall clock, with its window moved
+    /// onto the steady clock (on the right side of a step of the wall clock), where the
+    /// sequences' periods are.
+    fn on_steady_clock(&self, mut e: ExpectedEngagement, now: i64) -> ExpectedEngagement {
+        let (start, end) = (e.window_start.to_nanos(), e.window_end.to_nanos());
+        let mid = start + (end - start) / 2;
+        let shift = self.clock.steady_of(mid, now) - mid;
+        e.window_start = Time::from_nanos(start + shift);
+        e.window_end = Time::from_nanos(end + shift);
+        e
     }
 
     /// What a game timer (or the robot step it stood for) sets off.
@@ -349,7 +390,7 @@ impl GameManager {
         let answered = &self.answered;
         let msg = match &self.session {
             None => GameState {
-                header: Header::at(Time::from_nanos(now)),
+                header: Header::at(self.stamp(now)),
                 phase,
                 user_model_cluster: -1,
                 status: status.clone(),
@@ -360,7 +401,7 @@ impl GameManager {
                 ..Default::default()
             },
             Some(s) => GameState {
-                header: Header::at(Time::from_nanos(now)),
+                header: Header::at(self.stamp(now)),
                 phase,
                 session_id: s.id.clone(),
                 user_id: s.user_id.clone(),

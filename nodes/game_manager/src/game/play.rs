@@ -125,7 +125,7 @@ impl GameManager {
             now,
         );
         self.out.push(Output::Task(TabletTask {
-            header: Header::at(Time::from_nanos(now)),
+            header: Header::at(self.stamp(now)),
             session_id,
             sequence_id,
             sequence_index: index,
@@ -236,7 +236,7 @@ impl GameManager {
         let engagement = self.engagement.gather(s.talk_start_ns, c.task_sent_ns);
         let names = |v: &[Emotion]| v.iter().map(|e| e.name().to_string()).collect();
         let result = SequenceResult {
-            header: Header::at(Time::from_nanos(now)),
+            header: Header::at(Time::from_nanos(self.clock.wall_of(now))),
             session_id: s.id.clone(),
             user_id: s.user_id.clone(),
             user_model_cluster: s.cluster,
@@ -253,8 +253,10 @@ impl GameManager {
             activity_result: scored.activity_result as f32,
             engagement: engagement.mean,
             engagement_per_second: engagement.per_second,
-            engagement_period_start: Time::from_nanos(s.talk_start_ns),
-            engagement_period_end: Time::from_nanos(c.task_sent_ns),
+            // Both ends stamped by the wall clock's offset now: one clock, whatever step came
+            // between them.
+            engagement_period_start: Time::from_nanos(self.clock.wall_of(s.talk_start_ns)),
+            engagement_period_end: Time::from_nanos(self.clock.wall_of(c.task_sent_ns)),
             response_time: c.response_time,
             sequences_planned: self.params.session.sequences_per_session as u8,
         };

@@ -12,6 +12,7 @@
 use super::{GameManager, Phase, Plan, Timer};
 use crate::params::SupervisionParams;
 use crate::protocol::{LogLevel, Output};
+use clock_steps::ClockSteps;
 use qt_therapy_msgs::builtin_interfaces::Time;
 use qt_therapy_msgs::std_msgs::Header;
 use qt_therapy_msgs::{ActionProposal, BehaviourState};
@@ -149,12 +150,12 @@ impl ProposalDesk {
 
     /// Starts (or starts again) the open proposal's countdown: the message that shows it and
     /// its deadline.
-    fn start_countdown(&mut self, now: i64) -> Option<(&OpenProposal, i64)> {
+    fn start_countdown(&mut self, now: i64, clock: &ClockSteps) -> Option<(&OpenProposal, i64)> {
         let p = self.open.as_mut()?;
         let deadline = now + self.countdown_ns;
         p.deadline_ns = Some(deadline);
-        p.message.header = Header::at(Time::from_nanos(now));
-        p.message.deadline = Time::from_nanos(deadline);
+        p.message.header = Header::at(Time::from_nanos(clock.wall_of(now)));
+        p.message.deadline = Time::from_nanos(clock.wall_of(deadline));
         Some((p, deadline))
     }
 
@@ -180,6 +181,7 @@ impl ProposalDesk {
         how: Settled,
         played: Option<Plan>,
         now: i64,
+        clock: &ClockSteps,
     ) -> Option<(ActionProposal, Plan)> {
         let open = self.open.take()?;
         let after_s = (now - open.proposed_ns) as f64 * 1e-9;
@@ -192,7 +194,7 @@ impl ProposalDesk {
         let asked = proposal_asked(&open.message);
         let why = open.message.reason.clone();
         let message = ActionProposal {
-            header: Header::at(Time::from_nanos(now)),
+            header: Header::at(Time::from_nanos(clock.wall_of(now))),
             status,
             played_action: plan.action.index() as u8,
             played_level: plan.level.get(),
@@ -215,10 +217,10 @@ impl ProposalDesk {
     }
 
     /// Withdraws the open proposal (nothing of it plays): the message that says so.
-    fn withdraw(&mut self, now: i64) -> Option<ActionProposal> {
+    fn withdraw(&mut self, now: i64, clock: &ClockSteps) -> Option<ActionProposal> {
         let open = self.open.take()?;
         Some(ActionProposal {
-            header: Header::at(Time::from_nanos(now)),
+            header: Header::at(Time::from_nanos(clock.wall_of(now))),
             status: ActionProposal::WITHDRAWN,
             response_time: ((now - open.proposed_ns) as f64 * 1e-9) as f32,
             ..open.message
@@ -254,7 +256,7 @@ impl GameManager {
             return;
         };
         let message = ActionProposal {
-            header: Header::at(Time::from_nanos(now)),
+            header: Header::at(Time::from_nanos(self.clock.wall_of(now))),
             session_id: s.id.clone(),
             // Its time of proposing: one id for every message of this proposal.
             proposal_id: u64::try_from(now).unwrap_or_default(),
@@ -290,7 +292,7 @@ impl GameManager {
     /// Starts (or starts again, on resume) the open proposal's countdown and shows it.
     pub(super) fn start_countdown(&mut self, now: i64) {
         let index = self.session.as_ref().map_or(0, |s| s.index);
-        let Some((p, deadline)) = self.proposals.start_countdown(now) else {
+        let Some((p, deadline)) = self.proposals.start_countdown(now, &self.clock) else {
             return;
         };
         let message = p.message.clone();
@@ -321,7 +323,7 @@ impl GameManager {
     /// Settles the open proposal: `played` is the plan that replaces it (None: it plays
     /// itself). Returns false when none was open.
     pub(super) fn settle_proposal(&mut self, how: Settled, played: Option<Plan>, now: i64) -> bool {
-        let Some((message, plan)) = self.proposals.settle(how, played, now) else {
+        let Some((message, plan)) = self.proposals.settle(how, played, now, &self.clock) else {
             return false;
         };
         self.drop_timers(|t| *t != Timer::ProposalRunsOut);
@@ -341,7 +343,7 @@ impl GameManager {
 
     /// The session ends with a proposal open: nothing of it plays.
     pub(super) fn withdraw_proposal(&mut self, now: i64) {
-        if let Some(message) = self.proposals.withdraw(now) {
+        if let Some(message) = self.proposals.withdraw(now, &self.clock) {
             self.out.push(Output::Proposal(message));
         }
     }

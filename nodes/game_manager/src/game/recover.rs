@@ -7,7 +7,7 @@
 //! is `session.rs`'s.
 
 use super::{GameManager, PendingOverride, Session};
-use crate::protocol::{LogLevel, Output};
+use crate::protocol::{LogLevel, Now, Output};
 use crate::recovery::RecoveredSession;
 use crate::sequence::SessionRng;
 use sequence_game::{Emotion, Feedback, Level, Outcome, State};
@@ -20,7 +20,8 @@ impl GameManager {
     }
 
     /// Takes over `r` at start-up, in place of [`GameManager::initial_outputs`].
-    pub fn recover(&mut self, r: RecoveredSession, now: i64) -> Vec<Output> {
+    pub fn recover(&mut self, r: RecoveredSession, now: impl Into<Now>) -> Vec<Output> {
+        let now = self.read_clocks(now.into());
         // Silence first: the dead node's last line may still be playing.
         self.silence_robot(now);
         for d in &r.damage {

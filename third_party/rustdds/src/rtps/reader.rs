@@ -290,7 +290,8 @@ impl Reader {
     };
 
     let mut changes: Vec<DataReaderStatus> = vec![];
-    let now = Timestamp::now();
+    // Receive times are on the steady clock.
+    let now = Timestamp::steady_now();
     for writer_proxy in self.matched_writers.values_mut() {
       if let Some(last_change) = writer_proxy.last_change_timestamp() {
         let since_last = now.duration_since(last_change);
@@ -545,7 +546,8 @@ impl Reader {
     mr_state: &MessageReceiverState,
   ) {
     // trace!("handle_data_msg entry");
-    let receive_timestamp = Timestamp::now();
+    // The history's key: on the steady clock, which a step of the wall clock does not move.
+    let receive_timestamp = Timestamp::steady_now();
 
     // parse write_options out of the message
     let mut write_options_b = WriteOptionsBuilder::new();
@@ -590,7 +592,7 @@ impl Reader {
   ) {
     let writer_guid = GUID::new_with_prefix_and_id(mr_state.source_guid_prefix, datafrag.writer_id);
     let seq_num = datafrag.writer_sn;
-    let receive_timestamp = Timestamp::now();
+    let receive_timestamp = Timestamp::steady_now();
     //trace!("DATAFRAG received topic={:?}", self.topic_name);
 
     // check if this submessage is expired already
@@ -599,7 +601,8 @@ impl Reader {
     if let (Some(source_timestamp), Some(lifespan)) =
       (mr_state.source_timestamp, self.qos().lifespan)
     {
-      let elapsed = receive_timestamp.duration_since(source_timestamp);
+      // The source's stamp is on its wall clock: compare it with ours.
+      let elapsed = Timestamp::now().duration_since(source_timestamp);
       if lifespan.duration < elapsed {
         info!(
           "DataFrag {:?} from {:?} lifespan exceeded. duration={:?} elapsed={:?}",

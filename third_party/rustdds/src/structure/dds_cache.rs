@@ -453,7 +453,7 @@ impl TopicCache {
       ChangesInRange::Reliable(self.get_changes_in_range_reliable(last_read_sn))
     } else {
       ChangesInRange::BestEffort(
-        self.get_changes_in_range_best_effort(latest_instant, Timestamp::now()),
+        self.get_changes_in_range_best_effort(latest_instant, Timestamp::steady_now()),
       )
     }
   }
@@ -552,7 +552,7 @@ impl TopicCache {
 
     // Now, reallocate old cache changes
     let reallocate_timeout = crate::Duration::from_secs(5);
-    let now = Timestamp::now();
+    let now = Timestamp::steady_now();
 
     // Take max to avoid crash if clock jumps backward.
     let reallocate_limit = max(now - reallocate_timeout, self.changes_reallocated_up_to);

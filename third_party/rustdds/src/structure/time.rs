@@ -64,6 +64,23 @@ impl Timestamp {
     })
   }
 
+  /// Now on a clock that never steps: the wall clock as it read when the process first
+  /// asked, advanced by the monotonic clock since. A reader's history is keyed by receive
+  /// time and read up to "now"; on the wall clock, a step back (NTP's first sync, `date -s`)
+  /// stalled best-effort reading until the clock caught up again ("Did my clock jump
+  /// backwards?") and froze the receive times at the step.
+  pub fn steady_now() -> Self {
+    static ORIGIN: std::sync::OnceLock<(std::time::Instant, DateTime<Utc>)> =
+      std::sync::OnceLock::new();
+    let (at, wall) = ORIGIN.get_or_init(|| (std::time::Instant::now(), Utc::now()));
+    chrono::TimeDelta::from_std(at.elapsed())
+      .ok()
+      .and_then(|elapsed| wall.checked_add_signed(elapsed))
+      .map_or(Timestamp::INVALID, |t| {
+        Self::try_from(t).unwrap_or(Timestamp::INVALID)
+      })
+  }
+
   pub fn to_ticks(self) -> u64 {
     (u64::from(self.seconds) << 32) + u64::from(self.fraction)
   }

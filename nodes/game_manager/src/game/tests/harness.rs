@@ -4,7 +4,7 @@
 
 use crate::game::GameManager;
 use crate::params::GameManagerParams;
-use crate::protocol::{Input, Output};
+use crate::protocol::{Input, Now, Output};
 use crate::recovery::RecoveredSession;
 use crate::session_file::{JournalEntry, SequenceRecord, SessionSummary};
 use qt_therapy_msgs::builtin_interfaces::Time;
@@ -60,6 +60,8 @@ pub struct Harness {
     saying: bool,
     /// How the robot answers a step (`qtrobot` backend).
     pub robot: Box<dyn FnMut(u64) -> RobotReply>,
+    /// The wall clock stepped by `.1` at steady time `.0` (the clock is the steady one).
+    pub wall_step: Option<(i64, i64)>,
 }
 
 /// A fixed rule in place of the learned policy: level 1 first; up a level after a success,
@@ -185,6 +187,7 @@ impl Harness {
             heard: Vec::new(),
             saying: false,
             robot: Box::new(|_| RobotReply::Done { after_s: 0.5 }),
+            wall_step: None,
         };
         h.absorb(initial);
         h
@@ -195,9 +198,21 @@ impl Harness {
         self.queue.insert((t, self.seq), input);
     }
 
+    /// The wall clock's reading at steady time `t`.
+    pub fn wall(&self, t: i64) -> i64 {
+        match self.wall_step {
+            Some((at, by)) if t >= at => t + by,
+            _ => t,
+        }
+    }
+
     /// Handles `input` now.
     pub fn feed(&mut self, input: Input) -> Vec<Output> {
-        let out = self.gm.handle(input, self.now);
+        let now = Now {
+            steady_ns: self.now,
+            wall_ns: self.wall(self.now),
+        };
+        let out = self.gm.handle(input, now);
         self.absorb(out.clone());
         out
     }
@@ -208,14 +223,14 @@ impl Harness {
     }
 
     /// One engagement window per second in [from, to), published 0.2 s after it closes;
-    /// `value(second)` None = no face.
+    /// `value(second)` None = no face. Stamped by the wall clock (set `wall_step` first).
     pub fn engagement(&mut self, from_s: i64, to_s: i64, value: impl Fn(i64) -> Option<f32>) {
         for sec in from_s..to_s {
             let v = value(sec);
             let msg = ExpectedEngagement {
                 source: "camera/0".into(),
-                window_start: Time::from_nanos(sec * S),
-                window_end: Time::from_nanos((sec + 1) * S),
+                window_start: Time::from_nanos(self.wall(sec * S)),
+                window_end: Time::from_nanos(self.wall(sec * S) + S),
                 has_faces: v.is_some(),
                 mean: v.unwrap_or(0.0),
                 smoothed: v.unwrap_or(0.0),

@@ -1,6 +1,7 @@
 //! Unit tests of the session state machine, driven through a simulated clock.
 
 mod answers;
+mod clock;
 mod commands;
 mod harness;
 mod heartbeats;

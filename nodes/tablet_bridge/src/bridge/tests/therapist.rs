@@ -212,5 +212,34 @@ fn two_starts_in_one_millisecond_open_two_sessions() {
     let first = published(&b.ws_text(t, &start, at(5))).0;
     let second = published(&b.ws_text(t, &start, at(5))).0;
     assert_ne!(first[0].session_id, second[0].session_id);
-    assert!(second[0].session_id.starts_with(&first[0].session_id));
+    let millis = |id: &str| {
+        id.strip_prefix("tablet-")
+            .and_then(|m| m.parse::<i64>().ok())
+    };
+    assert_eq!(
+        millis(&second[0].session_id),
+        millis(&first[0].session_id).map(|m| m + 1)
+    );
+}
+
+#[test]
+fn a_start_after_the_wall_clock_stepped_back_gets_an_id_past_the_last_session() {
+    let mut b = Bridge::new(params(), at(0));
+    let t = therapist(&mut b);
+    let start = cmd(PIN, "start", json!({"user_id": "c", "cluster": -1}));
+    let first = published(&b.ws_text(t, &start, at(5))).0;
+    // An hour back: the millisecond then may name a session of the hour before.
+    let back = Now {
+        monotonic: Duration::from_millis(10),
+        wall_nanos: WALL0 - 3_600_000_000_000,
+    };
+    let second = published(&b.ws_text(t, &start, back)).0;
+    assert_eq!(
+        first[0].session_id,
+        format!("tablet-{}", WALL0 / 1_000_000 + 5)
+    );
+    assert_eq!(
+        second[0].session_id,
+        format!("tablet-{}", WALL0 / 1_000_000 + 6)
+    );
 }
