@@ -38,6 +38,8 @@ pub struct BagInfo {
     pub complete: bool,
     /// The first bad record, if any.
     pub damage: Option<String>,
+    /// Steps of the wall clock the recorder saw: (log time, by how many ns).
+    pub clock_steps: Vec<(i64, i64)>,
     pub topics: Vec<TopicSummary>,
 }
 
@@ -91,6 +93,11 @@ impl BagInfo {
             ros_distro,
             complete: reader.is_complete(),
             damage: reader.damage().map(|e| e.to_string()),
+            clock_steps: reader
+                .clock_steps()
+                .iter()
+                .map(|s| (s.at_steady_ns, s.by_ns))
+                .collect(),
             topics,
         }
     }
@@ -142,6 +149,19 @@ impl BagInfo {
         );
         if let Some(d) = &self.damage {
             line("Damage", d.clone());
+        }
+        for (i, (at, by)) in self.clock_steps.iter().enumerate() {
+            let at = u64::try_from(*at).unwrap_or(0);
+            line(
+                if i == 0 { "Clock steps" } else { "" },
+                format!(
+                    "{:+.3}s at {} ({}): the wall clock was stepped; log times go on unstepped, \
+                     the stamps of what follows are that far off them",
+                    *by as f64 * 1e-9,
+                    utc(at),
+                    secs(at)
+                ),
+            );
         }
         let width = self.topics.iter().map(|x| x.topic.len()).max().unwrap_or(0);
         for (i, x) in self.topics.iter().enumerate() {

@@ -35,3 +35,8 @@ pub use error::{BagError, RecordAt};
 pub use reader::{BagReader, ReadOptions, Stamped};
 pub use scan::{ChannelInfo, RawMessage, SchemaInfo};
 pub use writer::{BagWriter, Channel, Compression, Stamp, WriterOptions, partial_path};
+
+/// The name of the metadata records of the wall clock's steps a recorder saw: `log_time` (on
+/// the recorder's steady clock, as every log time) and `by_ns` (negative: set back), decimal.
+/// Log times never step; the messages' stamps (the senders' wall clocks) step with the clock.
+pub const CLOCK_STEP: &str = "qt_therapy.clock_step";

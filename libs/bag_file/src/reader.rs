@@ -136,6 +136,21 @@ impl BagReader {
         (self.scan.chunks, &self.scan.compression)
     }
 
+    /// The wall clock's steps the recorder recorded ([`crate::CLOCK_STEP`]), in order; records
+    /// that do not read as one are left out.
+    pub fn clock_steps(&self) -> Vec<clock_steps::Step> {
+        self.metadata()
+            .iter()
+            .filter(|(name, _)| name == crate::CLOCK_STEP)
+            .filter_map(|(_, m)| {
+                Some(clock_steps::Step {
+                    at_steady_ns: m.get("log_time")?.parse().ok()?,
+                    by_ns: m.get("by_ns")?.parse().ok()?,
+                })
+            })
+            .collect()
+    }
+
     /// Metadata records (name, key/values), e.g. rosbag2's `serialized_metadata`.
     pub fn metadata(&self) -> &[(String, BTreeMap<String, String>)] {
         &self.scan.metadata

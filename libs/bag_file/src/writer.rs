@@ -321,6 +321,23 @@ impl<W: Write + Seek> BagWriter<W> {
             .map_err(|e| write_error(&bag, "a chunk", e))
     }
 
+    /// Records a step of the wall clock the recorder saw (`step.at_steady_ns` on its log-time
+    /// clock) as a metadata record of its own, read back by [`crate::BagReader::clock_steps`]
+    /// and told by `bag info`. The chunk so far is closed first.
+    pub fn write_clock_step(&mut self, step: clock_steps::Step) -> Result<(), BagError> {
+        let bag = self.bag.clone();
+        let record = mcap::records::Metadata {
+            name: crate::CLOCK_STEP.to_string(),
+            metadata: BTreeMap::from([
+                ("log_time".to_string(), step.at_steady_ns.to_string()),
+                ("by_ns".to_string(), step.by_ns.to_string()),
+            ]),
+        };
+        self.mcap()?
+            .write_metadata(&record)
+            .map_err(|e| write_error(&bag, "a clock step", e))
+    }
+
     /// Messages written so far.
     pub fn message_count(&self) -> u64 {
         self.topics.values().map(|t| t.count).sum()

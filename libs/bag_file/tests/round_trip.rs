@@ -250,3 +250,38 @@ fn typed_reads_refuse_the_wrong_type_or_topic() {
     assert_eq!(states.len(), 4);
     assert_eq!(states[3].message.status, "giving feedback");
 }
+
+#[test]
+fn a_step_of_the_wall_clock_is_recorded_read_back_and_told_by_bag_info() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("session.mcap");
+    let mut w = BagWriter::create(&path, &options(Compression::Zstd)).expect("create");
+    let state = w.add_topic(GAME_STATE).expect("topic");
+    let t0: u64 = 1_796_667_366_000_000_000;
+    w.write(state, t0, &qt_therapy_msgs::GameState::default())
+        .expect("write");
+    let step = clock_steps::Step {
+        at_steady_ns: t0 as i64 + 500_000_000,
+        by_ns: -3_600_000_000_000,
+    };
+    w.write_clock_step(step).expect("step");
+    w.write(
+        state,
+        t0 + 1_000_000_000,
+        &qt_therapy_msgs::GameState::default(),
+    )
+    .expect("write");
+    w.finish().expect("finish");
+    let reader = BagReader::open(&path).expect("reads");
+    assert_eq!(reader.clock_steps(), vec![step]);
+    assert_eq!(reader.raw_messages().len(), 2);
+    let text = BagInfo::of(&reader).to_text();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("Clock steps:"))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        line.contains("-3600.000s at 2026-12-07 18:16:06.500000000 UTC"),
+        "{line}"
+    );
+}

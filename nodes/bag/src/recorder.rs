@@ -6,7 +6,10 @@
 //! that was killed (a launcher's respawn) carries the dead one's `.partial` file over into its
 //! own bag first, so the session stays one bag and nothing already on disk is overwritten.
 //! Transient-local topics hand the new recorder their history again; what it carried over is
-//! not written twice.
+//! not written twice. Log times are the recorder's steady clock (RustDDS's receive time, which
+//! the suite's patch keeps there), so they stay in order when the wall clock is stepped; each
+//! step the recorder sees is written into the bag (`bag_file::CLOCK_STEP`), and `bag info`
+//! tells it.
 
 use crate::dds_types::bus_type;
 use crate::params::RecorderParams;
@@ -136,10 +139,21 @@ fn take_over_partial(output: &Path, clock: Clock) -> anyhow::Result<Option<(Path
     if !partial.exists() {
         return Ok(None);
     }
+    // Named by the time, and never over a file there (the wall clock may have been set back).
     let stamp = clock.now_nanos();
-    let mut aside = partial.clone().into_os_string();
-    aside.push(format!(".crashed-{stamp}"));
-    let aside = PathBuf::from(aside);
+    let mut n = 0;
+    let aside = loop {
+        let mut name = partial.clone().into_os_string();
+        name.push(format!(".crashed-{stamp}"));
+        if n > 0 {
+            name.push(format!("-{n}"));
+        }
+        let name = PathBuf::from(name);
+        if !name.exists() {
+            break name;
+        }
+        n += 1;
+    };
     std::fs::rename(&partial, &aside).with_context(|| {
         format!(
             "moving the unfinished {} of a recorder that died aside",
@@ -296,6 +310,9 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
     if let Some((aside, old)) = &taken_over {
         let (n, sent) = carry_over(old, &mut writer, &mut channels)?;
         carried = sent;
+        for step in old.clock_steps() {
+            writer.write_clock_step(step)?;
+        }
         tracing::warn!(
             from = %aside.display(),
             messages = n,
@@ -316,6 +333,9 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
     let mut flush = tokio::time::interval(Duration::from_secs_f64(params.flush_interval_s));
     // A topic carried over from a recorder that died keeps its channel when found again.
     let mut foreign_channels: BTreeMap<String, u16> = channels.clone();
+    let clock = bus.clock();
+    let mut steps = clock_steps::ClockSteps::new();
+    steps.observe(clock.steady_nanos(), clock.now_nanos());
     loop {
         // Biased: what is ready is taken in this order, never by tokio's random pick, so a
         // run on the in-process bus is the same every time.
@@ -326,6 +346,11 @@ pub async fn run<B: Bus + 'static, D: Discover<B>>(
                 // What the readers queued before the tick belongs in this flush.
                 while let Ok(sample) = rx.try_recv() {
                     write_sample(&mut writer, &mut carried, sample)?;
+                }
+                if let Some(step) = steps.observe(clock.steady_nanos(), clock.now_nanos()) {
+                    tracing::warn!("the wall clock stepped {:+.3} s: recorded in the bag; log \
+                        times go on unstepped", step.by_ns as f64 * 1e-9);
+                    writer.write_clock_step(step)?;
                 }
                 // Topics beside the suite's: channels before their first samples are taken.
                 for t in beside.discover(bus).await {

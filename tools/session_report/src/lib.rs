@@ -114,13 +114,46 @@ impl SessionLog {
     /// message delivered again taken once by the suite's rule (`session_log`,
     /// docs/session_log.md); a message that contradicts an earlier one of the same identity
     /// is an error naming both. With `session` set, only that session; otherwise the last
-    /// session in the bag.
+    /// session in the bag. Where the recorder saw the wall clock stepped, the stamps the
+    /// report places on its timeline (states, results, seconds of engagement) are moved onto
+    /// the recorder's unstepped clock, each on its side of the step, so the session is one
+    /// timeline.
     pub fn from_bag(
         reader: &bag_file::BagReader,
         session: Option<&str>,
     ) -> Result<SessionLog, session_log::SessionLogError> {
         let taken = session_log::SessionLog::read(reader)?;
-        let m = taken.messages;
+        let mut m = taken.messages;
+        let steps = clock_steps::ClockSteps::from_steps(reader.clock_steps());
+        // A stamp of the wall clock that reached the recorder at `log_time`, on its clock.
+        let unstepped = |t: &mut qt_therapy_msgs::builtin_interfaces::Time, log_time: u64| {
+            let log_time = i64::try_from(log_time).unwrap_or(i64::MAX);
+            *t = qt_therapy_msgs::builtin_interfaces::Time::from_nanos(
+                steps.steady_of(t.to_nanos(), log_time),
+            );
+        };
+        for s in &mut m.states {
+            unstepped(&mut s.message.header.stamp, s.log_time);
+        }
+        for r in &mut m.results {
+            unstepped(&mut r.message.header.stamp, r.log_time);
+        }
+        for e in &mut m.engagement {
+            // The second moves whole, by where its middle falls.
+            let (start, end) = (
+                e.message.window_start.to_nanos(),
+                e.message.window_end.to_nanos(),
+            );
+            let mut middle =
+                qt_therapy_msgs::builtin_interfaces::Time::from_nanos(start + (end - start) / 2);
+            unstepped(&mut middle, e.log_time);
+            let shift = middle.to_nanos() - (start + (end - start) / 2);
+            e.message.window_start =
+                qt_therapy_msgs::builtin_interfaces::Time::from_nanos(start + shift);
+            e.message.window_end =
+                qt_therapy_msgs::builtin_interfaces::Time::from_nanos(end + shift);
+            unstepped(&mut e.message.header.stamp, e.log_time);
+        }
         let wanted = session
             .map(str::to_string)
             .or_else(|| m.last_session().map(str::to_string))
