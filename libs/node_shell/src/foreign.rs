@@ -118,7 +118,8 @@ impl NodeShell {
                     continue;
                 };
                 let info = ros2_client::MessageInfo::from(&change);
-                let received = crate::clock::wall_nanos();
+                // The receive time on the steady clock, as every other tap's (a bag's log time).
+                let received = crate::clock::steady_nanos();
                 let raw = RawSample {
                     topic: name.clone(),
                     received_ns: received,
