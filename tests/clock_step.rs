@@ -10,8 +10,12 @@
 //!   cargo test -p suite_tests --test clock_step -- --nocapture
 //!   QT_KEEP_TEST_OUTPUT=1 ...   keeps each run's directory (bag, logs, session files)
 
-use qt_therapy_msgs::topics::{GAME_STATE, SEQUENCE_RESULT};
-use qt_therapy_msgs::{GameState, SequenceResult};
+use qt_therapy_msgs::topics::{
+    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,
+    ROBOT_SPEECH, SEQUENCE_RESULT, TABLET_ANSWER,
+};
+use qt_therapy_msgs::{GameState, Heartbeat};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use suite_tests::{run_in_loopback_netns, workspace_bin};
@@ -22,6 +26,31 @@ const LIBFAKETIME: &str = "/usr/lib/x86_64-linux-gnu/faketime/libfaketimeMT.so.1
 
 /// The session's pace: a session takes about 30 s.
 const TIME_SCALE: f64 = 0.05;
+
+/// Reliable topics with one publisher in the main job: every sequence number between the first
+/// and the last recorded must be in the bag once (as tests/frozen_process.rs counts them).
+const COUNTED_TOPICS: [&str; 7] = [
+    SEQUENCE_RESULT.name,
+    TABLET_ANSWER.name,
+    DECISION.name,
+    EXPECTED_ENGAGEMENT.name,
+    ROBOT_SPEECH.name,
+    ROBOT_EMOTION.name,
+    ROBOT_GESTURE.name,
+];
+
+/// Lost (gaps) and duplicated numbers of one publisher.
+fn gaps_and_repeats(numbers: &[u64]) -> (u64, u64) {
+    let distinct: BTreeSet<u64> = numbers.iter().copied().collect();
+    let span = match (distinct.first(), distinct.last()) {
+        (Some(a), Some(b)) => b - a + 1,
+        _ => 0,
+    };
+    (
+        span - distinct.len() as u64,
+        (numbers.len() - distinct.len()) as u64,
+    )
+}
 
 /// What one stepped session left.
 struct SteppedRun {
@@ -249,17 +278,41 @@ fn check(run: &SteppedRun, step_s: f64) {
             f.answers
         );
     }
-    let results = reader
-        .messages::<SequenceResult>(SEQUENCE_RESULT.name)
-        .expect("results");
+    // Nothing lost or repeated across the step: every reliable message by its publisher's
+    // sequence number, every heartbeat by its process's counter.
+    let mut by_topic: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+    for (channel, m) in reader.iter() {
+        if let Some(t) = COUNTED_TOPICS.iter().find(|t| **t == channel.topic) {
+            by_topic.entry(t).or_default().push(u64::from(m.sequence));
+        }
+    }
+    let mut counted = 0;
+    for topic in COUNTED_TOPICS {
+        let numbers = by_topic.remove(topic).unwrap_or_default();
+        assert_eq!(gaps_and_repeats(&numbers), (0, 0), "{topic}: {numbers:?}");
+        counted += numbers.len();
+    }
+    let mut beats: BTreeMap<u32, Vec<u64>> = BTreeMap::new();
+    for h in reader
+        .messages::<Heartbeat>(HEARTBEAT.name)
+        .expect("heartbeats")
+    {
+        beats
+            .entry(h.message.pid)
+            .or_default()
+            .push(h.message.sequence);
+    }
+    for (pid, numbers) in &beats {
+        assert_eq!(gaps_and_repeats(numbers), (0, 0), "heartbeats of pid {pid}");
+        counted += numbers.len();
+    }
     eprintln!(
         "wall clock stepped {step_s:+.0} s after sequence 3: 10 sequences, {} seconds of \
-         engagement with a face, the bag spans {span_s:.1} s; the run took {:.1} s ({:.1} s \
-         after the step); {} results",
+         engagement with a face, {counted} reliable messages counted (0 lost, 0 repeated), \
+         the bag spans {span_s:.1} s; the run took {:.1} s ({:.1} s after the step)",
         session.engagement.iter().filter(|e| e.has_faces).count(),
         run.took.as_secs_f64(),
         run.after_step.as_secs_f64(),
-        results.len()
     );
 }
 
