@@ -6,7 +6,10 @@
 //! and one that runs out. The DDS process tests (tests/simulated_session.rs and others) keep
 //! what needs the wire.
 
+// Shared with tests/month.rs, which uses parts these tests do not (run directories, stopping
+// one node).
 #[path = "in_process/suite.rs"]
+#[allow(dead_code)]
 mod suite;
 
 use bag_file::BagReader;

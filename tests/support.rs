@@ -46,6 +46,18 @@ pub struct SessionBag {
 /// simulated child answers), at least 10 seconds with a face (the classifier saw it), and no
 /// feedback before the first sequence. `context` ends each failure's message.
 pub fn whole_session_bag(bag: &std::path::Path, context: &str) -> SessionBag {
+    whole_session_in_bag(bag, None, context)
+}
+
+/// The same for session `wanted` of a bag that holds several (a day's run on the robot); None:
+/// the bag holds one session. The seconds with a face are then the seconds of engagement of the
+/// session's results (ExpectedEngagement names no session), and `engagement` holds the whole
+/// bag's.
+pub fn whole_session_in_bag(
+    bag: &std::path::Path,
+    wanted: Option<&str>,
+    context: &str,
+) -> SessionBag {
     use qt_therapy_msgs::topics::{DECISION, EXPECTED_ENGAGEMENT, SEQUENCE_RESULT};
     let reader = bag_file::BagReader::open(bag).expect("the recorder wrote a readable bag");
     let results: Vec<qt_therapy_msgs::SequenceResult> = reader
@@ -53,6 +65,7 @@ pub fn whole_session_bag(bag: &std::path::Path, context: &str) -> SessionBag {
         .expect("results")
         .into_iter()
         .map(|s| s.message)
+        .filter(|r: &qt_therapy_msgs::SequenceResult| wanted.is_none_or(|id| r.session_id == id))
         .collect();
     assert_eq!(
         results.iter().map(|r| r.sequence_index).collect::<Vec<_>>(),
@@ -75,16 +88,20 @@ pub fn whole_session_bag(bag: &std::path::Path, context: &str) -> SessionBag {
         .into_iter()
         .map(|s| s.message)
         .collect();
+    let with_faces = match wanted {
+        None => engagement.iter().filter(|e| e.has_faces).count(),
+        Some(_) => results.iter().map(|r| r.engagement_per_second.len()).sum(),
+    };
     assert!(
-        engagement.iter().filter(|e| e.has_faces).count() >= 10,
-        "{} seconds with faces",
-        engagement.len()
+        with_faces >= 10,
+        "{with_faces} seconds with faces; {context}"
     );
     let decisions: Vec<qt_therapy_msgs::Decision> = reader
         .messages(DECISION.name)
         .expect("decisions")
         .into_iter()
         .map(|s| s.message)
+        .filter(|d: &qt_therapy_msgs::Decision| wanted.is_none_or(|id| d.session_id == id))
         .collect();
     assert!(
         decisions.iter().all(|d| d.step != 1 || d.feedback == 0),

@@ -71,6 +71,8 @@ pub struct Setup {
     pub seed: i64,
     /// The child's user-model cluster.
     pub cluster: i64,
+    /// The user the console starts sessions for (`--user`).
+    pub user: String,
     /// More `--param` overrides per node, as `game_args:=...` in the launch file.
     pub more: BTreeMap<Node, Vec<String>>,
     /// Start the policy with the Q-tables it pretrains when it has none (`bags/q_tables`,
@@ -85,6 +87,7 @@ impl Default for Setup {
             time_scale: 0.2,
             seed: 7,
             cluster: 0,
+            user: "sim-child-1".into(),
             more: BTreeMap::new(),
             robot_tables: true,
         }
@@ -99,8 +102,12 @@ struct Running {
 /// A suite running on one in-process bus.
 pub struct Suite {
     pub bus: InProcessBus,
-    /// Where the bag, the session files and the Q-tables go (the launch file's `out`).
+    /// Where the Q-tables go, and the run directory unless another is set (the launch file's
+    /// `out`).
     pub out: PathBuf,
+    /// The run directory: the bag and the session files (`out` until [`Suite::set_run`]), as
+    /// the robot's service makes one per start.
+    pub run: PathBuf,
     pub setup: Setup,
     running: BTreeMap<Node, Running>,
     /// The tablet bridge's pages, while it runs.
@@ -153,15 +160,24 @@ impl Suite {
         Suite {
             bus: InProcessBus::new(Clock::starting_at(T0_NS)),
             out: out.to_path_buf(),
+            run: out.to_path_buf(),
             setup,
             running: BTreeMap::new(),
             pages: None,
         }
     }
 
+    /// Bags and session files go into `run` (made) from the next start of the recorder and
+    /// the game manager on.
+    pub fn set_run(&mut self, run: &Path) {
+        std::fs::create_dir_all(run).expect("the run directory");
+        self.run = run.to_path_buf();
+    }
+
     fn overrides(&self, node: Node) -> Vec<String> {
         let s = &self.setup;
         let out = self.out.display();
+        let run = self.run.display();
         let mut o: Vec<String> = match node {
             Node::Recorder => vec![],
             Node::UserModel => vec![format!("model_file:={}", workspace_file(USER_MODELS))],
@@ -174,7 +190,7 @@ impl Suite {
                 workspace_file("nodes/engagement_classifier/models/synthetic_engagement.json")
             )],
             Node::GameManager => vec![
-                format!("sessions_dir:={out}"),
+                format!("sessions_dir:={run}"),
                 format!("time_scale:={}", s.time_scale),
                 format!("seed:={}", s.seed),
                 format!("user_model_file:={}", workspace_file(USER_MODELS)),
@@ -202,7 +218,7 @@ impl Suite {
                     .parameters(node.name())
                     .expect("recorder parameters");
                 let what = bag::recorder::Recording {
-                    output: self.out.join("session.mcap"),
+                    output: self.run.join("session.mcap"),
                     topics: Vec::new(),
                     compression: None,
                 };
@@ -249,7 +265,7 @@ impl Suite {
                 let (params, path): (game_manager::GameManagerParams, _) =
                     options.parameters(node.name()).expect("parameters");
                 let lock =
-                    InstanceLock::acquire(&self.out, node.name(), "session files").expect("free");
+                    InstanceLock::acquire(&self.run, node.name(), "session files").expect("free");
                 tokio::spawn(async move {
                     let _lock = lock;
                     let r = game_manager::node::run(&mut bus, params, &path).await;
@@ -294,6 +310,19 @@ impl Suite {
         let r = self.running.remove(&node).expect("it runs");
         r.task.abort();
         let _ = r.task.await;
+        if node == Node::Bridge {
+            self.pages = None;
+        }
+    }
+
+    /// Stops `node` as SIGINT does; it must end cleanly.
+    pub async fn stop(&mut self, node: Node) {
+        let r = self.running.remove(&node).expect("it runs");
+        r.stop.stop();
+        r.task
+            .await
+            .expect("the node's task")
+            .unwrap_or_else(|e| panic!("{node:?} ended with an error: {e:#}"));
         if node == Node::Bridge {
             self.pages = None;
         }
@@ -410,7 +439,7 @@ pub struct Therapist {
 }
 
 impl Suite {
-    /// The console's `run-session --user sim-child-1 --cluster <cluster>` (and
+    /// The console's `run-session --user <user> --cluster <cluster>` (and
     /// `--accept-proposals`), as the main job's therapist.
     pub fn run_session(
         &self,
@@ -422,7 +451,7 @@ impl Suite {
         let lines = Arc::new(Mutex::new(Vec::new()));
         let said = lines.clone();
         let start = therapist_console::console::Start {
-            user: "sim-child-1".into(),
+            user: self.setup.user.clone(),
             cluster: self.setup.cluster as i32,
             session: session.map(String::from),
             wait: Duration::from_secs(60),
