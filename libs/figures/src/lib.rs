@@ -3,6 +3,7 @@
 //! two files always show the same picture.
 
 pub mod engagement;
+pub mod progress;
 
 use std::path::{Path, PathBuf};
 

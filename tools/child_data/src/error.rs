@@ -4,15 +4,14 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ChildDataError {
-    #[error("user id {id:?} {reason}")]
-    UserId { id: String, reason: String },
+    /// A user id that cannot be a child's, or a place that is not there.
+    #[error(transparent)]
+    Stored(#[from] child_sessions::StoredError),
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{path} does not exist: nothing to search there (give --data or a path that exists)")]
-    Missing { path: PathBuf },
     #[error(transparent)]
     Bag(#[from] bag_file::BagError),
     #[error("{path}: {reason}")]

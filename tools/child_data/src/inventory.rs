@@ -529,6 +529,15 @@ impl Inventory {
         let Ok(html) = read_capped(&f.path) else {
             return self.unknown(f);
         };
+        // A child's progress report (`qt-therapy-report --user`) is about that child alone.
+        if child_sessions::progress_report_of(&html).as_deref() == Some(self.user.as_str()) {
+            return self.push(
+                Some(f),
+                ItemKind::Report,
+                "the progress report of this user across sessions".into(),
+                Content::Whole,
+            );
+        }
         match rows::report_title(&html) {
             Some((session, user)) if user == self.user.as_str() => self.push(
                 Some(f),

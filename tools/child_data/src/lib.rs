@@ -1,8 +1,10 @@
 //! A child's data on the robot: everything the suite holds for one user id, listed, exported
 //! into one archive, or erased (`qt-therapy-data list|export|erase --user ID`, docs/privacy.md).
 //!
-//! - [`find`] walks the places given for the files the suite writes;
-//! - [`sessions`], [`bags`], [`rows`] read whose each file, message, row and line is;
+//! - [`find`] walks the places given for the files the suite writes, [`sessions`] reads whose
+//!   each session file is and [`user`] checks the id (all three `child_sessions`'s, shared
+//!   with the child list and the progress report); [`bags`], [`rows`] read whose each
+//!   message, row and line is;
 //! - [`inventory`] gathers what one user has where, what erase would do and what stops it;
 //! - [`export`] writes the archive and its manifest; [`erase`] removes and rewrites, through
 //!   [`replace`] (whole-file replacement keeping owner and mode) and [`live`] (is a run still
@@ -23,13 +25,12 @@ pub mod bags;
 pub mod erase;
 pub mod error;
 pub mod export;
-pub mod find;
 pub mod inventory;
 pub mod live;
 pub mod replace;
 pub mod rows;
-pub mod sessions;
-pub mod user;
+
+pub use child_sessions::{find, sessions, user};
 
 pub use error::ChildDataError;
 pub use inventory::{Inventory, Item, ItemKind};

@@ -3,7 +3,7 @@
 //! field exactly; free text only where the id stands as a whole token, so erasing user `7`
 //! does not take every log line holding a 7, nor user `child-7` the lines of `child-7-2`.
 
-use crate::error::ChildDataError;
+use crate::error::StoredError;
 use qt_therapy_msgs::validate::MAX_ID_LEN;
 
 /// A user id as the therapist gave it at START (`TherapistCommand.user_id`).
@@ -17,8 +17,8 @@ pub struct UserId {
 
 impl UserId {
     /// The id, checked as the game manager checks it: no session can have another.
-    pub fn new(id: &str) -> Result<UserId, ChildDataError> {
-        let bad = |reason: &str| ChildDataError::UserId {
+    pub fn new(id: &str) -> Result<UserId, StoredError> {
+        let bad = |reason: &str| StoredError::UserId {
             id: id.chars().take(140).collect(),
             reason: reason.to_string(),
         };

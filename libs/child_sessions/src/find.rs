@@ -6,7 +6,7 @@
 //! logs). Symbolic links are not followed; a directory that cannot be read is reported, since
 //! then nobody can say what it holds.
 
-use crate::error::ChildDataError;
+use crate::error::StoredError;
 use std::path::{Path, PathBuf};
 
 /// What a file is, by its name.
@@ -68,24 +68,24 @@ pub const STAGING_PREFIX: &str = ".child_data-";
 
 /// Walks each place (made absolute and canonical, so paths compare with processes' paths);
 /// a place that does not exist is an error, one that cannot be read is reported.
-pub fn walk(places: &[PathBuf]) -> Result<Walk, ChildDataError> {
+pub fn walk(places: &[PathBuf]) -> Result<Walk, StoredError> {
     let mut walk = Walk::default();
     for place in places {
         let canonical = match std::fs::canonicalize(place) {
             Ok(p) => p,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(ChildDataError::Missing {
+                return Err(StoredError::Missing {
                     path: place.clone(),
                 });
             }
-            Err(e) => return Err(ChildDataError::io(place)(e)),
+            Err(e) => return Err(StoredError::io(place)(e)),
         };
         if walk.places.contains(&canonical) {
             continue;
         }
         let index = walk.places.len();
         walk.places.push(canonical.clone());
-        let meta = std::fs::symlink_metadata(&canonical).map_err(ChildDataError::io(place))?;
+        let meta = std::fs::symlink_metadata(&canonical).map_err(StoredError::io(place))?;
         if meta.is_file() {
             walk.files.push(Found {
                 rel: PathBuf::from(canonical.file_name().unwrap_or_default()),
