@@ -147,9 +147,15 @@ pub fn progress_fragment(p: &Progress, lang: Language, top: u8, as_of_ns: i64) -
     if !p.problems.is_empty() {
         let _ = write!(
             html,
-            "<section class=\"problems\"><h{h2}>{}</h{h2}><ul>",
+            "<section class=\"problems\"><h{h2}>{}</h{h2}>",
             w("problems_title")
         );
+        // Marked as English for a screen reader reading a German page (WCAG 3.1.2).
+        if lang == Language::En {
+            html.push_str("<ul>");
+        } else {
+            let _ = write!(html, "<p>{}</p><ul lang=\"en\">", w("problems_in_english"));
+        }
         for problem in &p.problems {
             let _ = write!(html, "<li>{}</li>", escape(problem));
         }
@@ -345,6 +351,26 @@ mod tests {
             progress_report_of("<html><title>Session s — user u</title>"),
             None
         );
+    }
+
+    #[test]
+    fn the_readers_english_messages_are_marked_as_english_on_a_german_page() {
+        let p = Progress {
+            user: crate::UserId::new("child-7").expect("id"),
+            places: Vec::new(),
+            sessions: Vec::new(),
+            problems: vec!["no bag in run-4".into()],
+            last_decision: None,
+            belief: Belief::NotCarried,
+        };
+        let de = progress_fragment(&p, Language::De, 2, 0);
+        assert!(
+            de.contains("stehen auf Englisch")
+                && de.contains("<ul lang=\"en\"><li>no bag in run-4"),
+            "{de}"
+        );
+        let en = progress_fragment(&p, Language::En, 2, 0);
+        assert!(en.contains("<ul><li>no bag in run-4") && !en.contains("lang=\"en\"><li>"));
     }
 
     /// Every key the report looks up is in `words` in both languages.

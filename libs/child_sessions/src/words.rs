@@ -21,6 +21,12 @@ pub(crate) fn word(lang: Language, key: &str) -> &'static str {
             "Not read, or read in part",
             "Nicht oder nur teilweise gelesen",
         ),
+        // Said only in the other languages: the messages come from the readers (and their
+        // libraries' errors) as the suite's logs say them, in English.
+        "problems_in_english" => (
+            "The messages are in English, as in the suite's logs.",
+            "Die Meldungen stehen auf Englisch, wie in den Protokollen der Suite.",
+        ),
         "across_title" => ("Across sessions", "Über die Sitzungen"),
         "per_session_title" => ("Per session", "Je Sitzung"),
         "no_sessions" => (
@@ -101,6 +107,7 @@ pub(crate) const KEYS: &[&str] = &[
     "belief_title",
     "belief_not_carried",
     "problems_title",
+    "problems_in_english",
     "across_title",
     "per_session_title",
     "no_sessions",
