@@ -19,6 +19,8 @@ command -v openssl >/dev/null || need_apt+=(openssl)
 command -v pkg-config >/dev/null || need_apt+=(pkg-config)
 # The clock-step test steps the nodes' wall clock with libfaketime.
 [ -e /usr/lib/x86_64-linux-gnu/faketime/libfaketimeMT.so.1 ] || need_apt+=(faketime)
+# The browser test runs axe-core (Deque's accessibility engine), installed from the npm registry.
+command -v npm >/dev/null || need_apt+=(npm)
 # The bag check's Python readers go into a venv: Debian's own python3 refuses `pip install`
 # into the system (PEP 668), and a venv needs ensurepip, which Debian ships apart.
 command -v python3 >/dev/null || need_apt+=(python3)
@@ -44,9 +46,21 @@ rm -f "$ros2_venv/.installed" "$ros2_venv/.failed"
   fi ) > "$logs/ros2-venv.log" 2>&1 &
 export QT_ROS2_VENV="$ros2_venv"
 
+# axe-core for the browser test, at the version and integrity nodes/tablet_bridge/tests/axe/
+# package-lock.json pins, into the target directory (nothing of npm's is committed); fetched
+# while the build runs, and again only when the pinned version changes.
+axe_pin=nodes/tablet_bridge/tests/axe
+axe="${CARGO_TARGET_DIR:-target}/axe-core"
+( if ! cmp -s "$axe_pin/package-lock.json" "$axe/package-lock.json" ||
+    [ ! -f "$axe/node_modules/axe-core/axe.min.js" ]; then
+    rm -rf "$axe" && mkdir -p "$axe" && cp "$axe_pin/package.json" "$axe_pin/package-lock.json" "$axe/" &&
+      cd "$axe" && npm ci --ignore-scripts --no-audit --no-fund
+  fi ) > "$logs/axe.log" 2>&1 &
+axe_pid=$!
 cargo build --workspace --bins
+wait "$axe_pid" || { cat "$logs/axe.log"; echo "installing axe-core failed"; exit 1; }
 # Everything the tests need is installed above, so a test that would skip for want of a
-# network namespace or a browser fails instead: a green run has run every DDS test.
+# network namespace, a browser or axe-core fails instead: a green run has run every DDS test.
 export QT_REQUIRE_ALL_TESTS=1
 
 # The Python bag readers' venv, made meanwhile (the network and the disk, not the CPU).

@@ -374,7 +374,7 @@ pub fn tablet_ws(data: &[u8]) {
                     panic!("the bridge published an invalid answer {a:?}: {e}");
                 }
             }
-            Output::Close(..) | Output::Log(..) => {}
+            Output::Close(..) | Output::Log(..) | Output::Read(..) => {}
         }
     }
 }

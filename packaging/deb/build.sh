@@ -138,6 +138,7 @@ for f in params/*.yaml; do
     -e 's#"nodes/engagement_classifier/models/#"/usr/share/qt-therapy/models/engagement_classifier/#' \
     -e 's#q_table_dir: "out/q_tables"#q_table_dir: "/var/lib/qt-therapy/q_tables"#' \
     -e 's#sessions_dir: "sessions"#sessions_dir: "/var/lib/qt-therapy/sessions"#' \
+    -e 's#sessions_root: "out"#sessions_root: "/var/lib/qt-therapy/sessions"#' \
     "$f" >"$root/etc/qt-therapy/$(basename "$f")"
 done
 # The tablets reach the bridge over the robot's network, over HTTPS with the certificate the
@@ -151,7 +152,7 @@ sed -i -e 's#http_bind: "127.0.0.1:8080"#http_bind: "0.0.0.0:8080"#' \
 grep -q 'tls_key_file: "/etc/qt-therapy/tls/server.key"' "$root/etc/qt-therapy/tablet_bridge.yaml" ||
   { echo "build.sh: the installed tablet_bridge.yaml names no certificate" >&2; exit 1; }
 install -m 0640 packaging/deb/environment "$root/etc/qt-therapy/environment"
-if grep -nE '"(nodes|out|params|sessions)/|"1234"' "$root"/etc/qt-therapy/*.yaml; then
+if grep -nE '"(nodes|out|params|sessions)/|"1234"|: "out"' "$root"/etc/qt-therapy/*.yaml; then
   echo "build.sh: a parameter above still names a workspace path or the example PIN" >&2
   exit 1
 fi

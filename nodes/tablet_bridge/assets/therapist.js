@@ -1,5 +1,6 @@
 // The therapist tablet: unlock with the PIN, then watch the game (state, engagement trend,
-// each decision with its Q-values, each result) and command it; proposals are proposal.js's. The bridge checks everything
+// each decision with its Q-values, each result) and command it; proposals are proposal.js's,
+// the children (choosing one, their progress) children.js's. The bridge checks everything
 // again; the buttons' enabled state is only a hint. The game's rules (which phases are a
 // sequence under way, the actions and feedback by name, a sequence's score and the session's
 // total) come from the bridge; this page only shows and translates them.
@@ -13,9 +14,13 @@ let phase = "unknown";
 let running = false;
 let engagement = [];   // {t, smoothed, mean, has_faces}
 
+// "login", "main" (the session) or "progress" (a child's progress, printable).
 function show(view) {
   $("login-view").classList.toggle("hidden", view !== "login");
-  $("main-view").classList.toggle("hidden", view !== "main");
+  $("topbar").classList.toggle("hidden", view === "login");
+  $("columns").classList.toggle("hidden", view !== "main");
+  $("progress-view").classList.toggle("hidden", view !== "progress");
+  document.body.dataset.view = view;
 }
 
 function toast(text, bad) {
@@ -32,7 +37,9 @@ function command(kind, extra) {
 }
 
 function updateButtons() {
-  $("start").disabled = running || phase === "paused";
+  const chosen = typeof chosenChild === "string" && chosenChild !== "";
+  $("start").disabled = running || phase === "paused" || !chosen;
+  $("show-progress").disabled = !chosen;
   $("pause").disabled = !running;
   $("resume").disabled = phase !== "paused";
   $("stop").disabled = !(running || phase === "paused");
@@ -43,7 +50,11 @@ function fmt(x, digits) {
   return typeof x === "number" && isFinite(x) ? x.toFixed(digits) : "–";
 }
 
+const ENDED = ["finished", "stopped", "emergency_stopped"];
+
 function showGame(g) {
+  // A session that just ended is stored now: the list shows it.
+  if (ENDED.includes(g.phase) && !ENDED.includes(phase) && phase !== "unknown") childrenRequest();
   phase = g.phase;
   running = g.running;
   const badge = $("phase");
@@ -55,7 +66,9 @@ function showGame(g) {
   $("g-feedback").textContent = g.sequence_index ? t(g.feedback_name) : "–";
   $("g-score").textContent = g.last_score;
   $("g-fallback").textContent = g.policy_fallback ? t("yes") : t("no");
-  $("g-user").textContent = g.user_id ? g.user_id + " (cluster " + g.cluster + ")" : "–";
+  $("g-user").textContent = g.user_id
+    ? g.user_id + " (" + (g.cluster < 0 ? t("default_cluster") : "cluster " + g.cluster) + ")"
+    : "–";
   $("g-status").textContent = g.status || "–";
   updateButtons();
   proposalFollowsGame(g);
@@ -162,7 +175,14 @@ function drawTrend() {
     for (const k in attrs) e.setAttribute(k, attrs[k]);
     return e;
   };
+  // The chart's text alternative (the svg is labelled by this title): what it shows now.
+  const title = el("title", { id: "chart-label" });
+  const last = engagement[engagement.length - 1];
+  title.textContent = last
+    ? t("chart_label").replace("{n}", engagement.length).replace("{e}", fmt(last.smoothed, 2))
+    : t("chart_empty");
   svg.replaceChildren(
+    title,
     el("line", { x1: 0, x2: W, y1: y(0), y2: y(0), class: "axis" }),
     el("line", { x1: 0, x2: W, y1: y(1), y2: y(1), class: "grid" }),
     el("line", { x1: 0, x2: W, y1: y(-1), y2: y(-1), class: "grid" }),
@@ -205,7 +225,8 @@ function onMessage(m) {
       $("results").tBodies[0].replaceChildren();
       $("g-total").textContent = "–";
       clearProposal();
-      show("main");
+      show(document.body.dataset.view === "progress" ? "progress" : "main");
+      childrenRequest();
       break;
     case "game": showGame(m); break;
     case "decision": addDecision(m); break;
@@ -213,6 +234,9 @@ function onMessage(m) {
     case "proposal": showProposal(m); break;
     case "engagement": addEngagement(m); drawTrend(); break;
     case "engagement_history": engagement = m.points; drawTrend(); break;
+    case "children": showChildren(m); break;
+    case "child_checked": childChecked(m); break;
+    case "progress": showProgress(m); break;
     case "command_sent":
       toast(t("sent") + ": " + m.command + " (" + m.session_id + ", #" + m.command_id + ")", false);
       break;
@@ -236,8 +260,9 @@ $("login-form").addEventListener("submit", (event) => {
   socket.send({ type: "login", pin: pin });
 });
 $("start").addEventListener("click", () => {
+  // The cluster only when chosen under "Advanced": otherwise the policy's default plays.
   const cluster = parseInt($("cluster").value, 10);
-  const extra = { user_id: $("user-id").value.trim() };
+  const extra = { user_id: chosenChild };
   if (!isNaN(cluster)) extra.cluster = cluster;
   command("start", extra);
 });
@@ -250,7 +275,7 @@ for (const l of [1, 2, 3]) {
 }
 
 translatePage();
-updateButtons();
+drawTrend();
 // The PIN and the child's results cross the network readable by anyone on it: only over
 // plain HTTP to another computer (the bridge serves that only with allow_plain_http).
 const host = location.hostname;
@@ -258,7 +283,11 @@ const loopback = host === "localhost" || host.startsWith("127.") || host === "[:
 const unencrypted = location.protocol !== "https:" && !loopback;
 $("unencrypted").classList.toggle("hidden", !unencrypted);
 document.body.classList.toggle("unencrypted", unencrypted);
-const socket = connectSocket("/ws/therapist", onMessage, (online) => {
-  $("offline").classList.toggle("hidden", online);
-  if (!online) loggedIn = false;
+// Connected once every script of the page has run (children.js's functions handle messages).
+let socket = null;
+document.addEventListener("DOMContentLoaded", () => {
+  socket = connectSocket("/ws/therapist", onMessage, (online) => {
+    $("offline").classList.toggle("hidden", online);
+    if (!online) loggedIn = false;
+  });
 });

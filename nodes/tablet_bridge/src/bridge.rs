@@ -9,12 +9,13 @@
 use crate::child::ChildTask;
 use crate::connections::Connections;
 use crate::game::GameHistory;
-use crate::io::{ClientId, DdsInput, Now, Output, log};
+use crate::io::{ClientId, DdsInput, Now, Output, StoredRead, log};
 use crate::params::TabletBridgeParams;
 use crate::proposal::Proposals;
 use crate::protocol::{ClientMessage, CommandKind, Role, ServerMessage};
 use crate::therapist::{CommandFields, Commands, Made};
 use crate::watch::GameManagerWatch;
+use child_sessions::UserId;
 use qt_therapy_msgs::GameState;
 use std::time::Duration;
 use tracing::Level;
@@ -123,11 +124,49 @@ impl Bridge {
                 };
                 self.command(id, &pin, command, fields, now, out)
             }
+            (Role::Therapist, ClientMessage::Children { pin }) => {
+                if self
+                    .connections
+                    .may_command(id, &pin, &self.params, now, out)
+                {
+                    out.push(Output::Read(id, StoredRead::Children));
+                }
+            }
+            (Role::Therapist, ClientMessage::NewChild { pin, user_id }) => {
+                if self
+                    .connections
+                    .may_command(id, &pin, &self.params, now, out)
+                {
+                    match UserId::new(&user_id) {
+                        Ok(user) => out.push(Output::Send(
+                            id,
+                            ServerMessage::ChildChecked {
+                                user_id: user.as_str().to_string(),
+                            },
+                        )),
+                        Err(e) => self.connections.reject(id, e.to_string(), out),
+                    }
+                }
+            }
+            (Role::Therapist, ClientMessage::Progress { pin, user_id }) => {
+                if self
+                    .connections
+                    .may_command(id, &pin, &self.params, now, out)
+                {
+                    match UserId::new(&user_id) {
+                        Ok(user) => out.push(Output::Read(id, StoredRead::Progress(user))),
+                        Err(e) => self.connections.reject(id, e.to_string(), out),
+                    }
+                }
+            }
             (role, message) => {
                 let kind = match message {
                     ClientMessage::Answer { .. } => "answers",
                     ClientMessage::Login { .. } => "logins",
                     ClientMessage::Command { .. } => "commands",
+                    ClientMessage::Children { .. }
+                    | ClientMessage::NewChild { .. }
+                    | ClientMessage::Progress { .. } => "requests for children's data",
                 };
                 let page = if role == Role::Child {
                     "child"

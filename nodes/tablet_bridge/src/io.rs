@@ -32,6 +32,17 @@ pub enum Output {
     Answer(TabletAnswer),
     /// A line for the log (the shell logs it with `node_shell::logging::log_at`).
     Log(Level, String),
+    /// Read what is stored for a page (off the core: files), and send it the answer.
+    Read(ClientId, StoredRead),
+}
+
+/// What a therapist page asked of the stored sessions.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StoredRead {
+    /// The children the robot knows.
+    Children,
+    /// One child's progress.
+    Progress(child_sessions::UserId),
 }
 
 /// A log line as an output.

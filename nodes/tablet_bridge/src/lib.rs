@@ -3,7 +3,9 @@
 //! checks everything a tablet sends; `node` runs it on a bus (`node_shell::Bus`), its pages'
 //! messages coming from `server`, the axum shell, over HTTPS (`tls`);
 //! `pages` holds the HTML/CSS/JS/SVG compiled into the binary (no build step, no external
-//! resources); `certificates` makes the robot's own CA and server certificate (`tablet_tls`).
+//! resources); `stored` reads the child list and a child's progress for the therapist page
+//! from the stored sessions (off the core, which only asks for them); `certificates` makes the
+//! robot's own CA and server certificate (`tablet_tls`).
 
 pub mod bridge;
 pub mod certificates;
@@ -18,6 +20,7 @@ pub mod params;
 mod proposal;
 pub mod protocol;
 pub mod server;
+pub mod stored;
 pub mod therapist;
 pub mod tls;
 pub mod watch;

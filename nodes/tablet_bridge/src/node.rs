@@ -5,7 +5,7 @@
 //! the tablets; in process a test sends them itself, as a tablet's page would.
 
 use crate::bridge::Bridge;
-use crate::io::{ClientId, DdsInput, Now, Output};
+use crate::io::{ClientId, DdsInput, Now, Output, StoredRead};
 use crate::params::TabletBridgeParams;
 use crate::protocol::Role;
 use node_shell::{Bus, Clock};
@@ -134,6 +134,44 @@ pub(crate) fn now(clock: Clock, start: Instant) -> Now {
     }
 }
 
+/// Answers page `id`'s `read` from the stored sessions on a blocking thread, so the core's
+/// loop goes on meanwhile; the answer joins the page's queue like any other message.
+fn answer_from_storage(
+    params: &TabletBridgeParams,
+    clock: Clock,
+    id: ClientId,
+    read: StoredRead,
+    page: mpsc::Sender<ToPage>,
+) {
+    let root = std::path::PathBuf::from(&params.sessions_root);
+    let language = child_sessions::Language::from_code(&params.language)
+        .unwrap_or(child_sessions::Language::En);
+    let now_ns = clock.now_nanos();
+    tokio::spawn(async move {
+        let what = match &read {
+            StoredRead::Children => "the list of children",
+            StoredRead::Progress(_) => "a child's progress",
+        };
+        let read = tokio::task::spawn_blocking(move || {
+            crate::stored::answer(&read, &root, language, now_ns)
+        });
+        let message = match read.await {
+            Ok(m) => m,
+            Err(e) => {
+                tracing::error!(client = id, "reading {what} failed: {e}");
+                return;
+            }
+        };
+        match serde_json::to_string(&message) {
+            Ok(text) => {
+                tracing::info!(client = id, bytes = text.len(), "sent {what}");
+                let _ = page.send(ToPage::Text(text)).await;
+            }
+            Err(e) => tracing::error!(client = id, "could not encode {what}: {e}"),
+        }
+    });
+}
+
 /// The core's loop: page events, what the node takes from the bus (`dds_in`) and the core's
 /// deadlines through the core, in the order they come; its outputs to the pages' queues,
 /// `publish` and the log; until `stop` resolves.
@@ -146,7 +184,7 @@ pub(crate) async fn run_core(
     stop: impl Future<Output = ()>,
 ) {
     let start = Instant::now();
-    let mut core = Bridge::new(params, now(clock, start));
+    let mut core = Bridge::new(params.clone(), now(clock, start));
     let mut pages: BTreeMap<ClientId, mpsc::Sender<ToPage>> = BTreeMap::new();
     tokio::pin!(stop);
     loop {
@@ -216,6 +254,11 @@ pub(crate) async fn run_core(
                     let _ = publish.send(Publish::Answer(a)).await;
                 }
                 Output::Log(level, message) => node_shell::logging::log_at(level, &message),
+                Output::Read(id, read) => {
+                    if let Some(page) = pages.get(&id).cloned() {
+                        answer_from_storage(&params, clock, id, read, page);
+                    }
+                }
             }
         }
     }

@@ -16,7 +16,7 @@ const JS: &str = "text/javascript; charset=utf-8";
 const SVG: &str = "image/svg+xml";
 
 /// (path, content type, body); HTML bodies have `{{lang}}` replaced by the page language.
-const FILES: [(&str, &str, &str); 15] = [
+const FILES: [(&str, &str, &str); 17] = [
     ("/", HTML, include_str!("../assets/index.html")),
     ("/child", HTML, include_str!("../assets/child.html")),
     ("/therapist", HTML, include_str!("../assets/therapist.html")),
@@ -47,6 +47,17 @@ const FILES: [(&str, &str, &str); 15] = [
         "/assets/proposal.js",
         JS,
         include_str!("../assets/proposal.js"),
+    ),
+    (
+        "/assets/children.js",
+        JS,
+        include_str!("../assets/children.js"),
+    ),
+    // A child's progress (the report's body inside the therapist page), styled as the report.
+    (
+        "/assets/progress.css",
+        CSS,
+        child_sessions::report::STYLESHEET,
     ),
     (
         "/assets/faces/happy.svg",

@@ -21,6 +21,9 @@ pub struct TabletBridgeParams {
     pub pin: String,
     /// Page language: `en` or `de`.
     pub language: String,
+    /// Where the game manager's runs are (session files and bags, a directory per run, at
+    /// any depth): the therapist page's list of children and their progress are read here.
+    pub sessions_root: String,
     /// Token bucket per connection: sustained messages per second.
     pub ws_messages_per_second: f64,
     /// Token bucket per connection: burst size.
@@ -49,6 +52,7 @@ impl Default for TabletBridgeParams {
             allow_plain_http: false,
             pin: "1234".into(),
             language: "en".into(),
+            sessions_root: "out".into(),
             ws_messages_per_second: 5.0,
             ws_burst: 20,
             ws_max_message_bytes: 4096,
@@ -128,6 +132,12 @@ impl TabletBridgeParams {
             return bad(
                 "language",
                 format!("{:?} is not one of {LANGUAGES:?}", self.language),
+            );
+        }
+        if self.sessions_root.trim().is_empty() {
+            return bad(
+                "sessions_root",
+                "is empty: name the directory the game manager's runs are in".into(),
             );
         }
         if !(self.ws_messages_per_second.is_finite() && self.ws_messages_per_second > 0.0) {

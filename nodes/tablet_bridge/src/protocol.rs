@@ -57,6 +57,14 @@ pub enum ClientMessage {
         #[serde(default)]
         proposal: Option<u8>,
     },
+    /// Therapist page: the children the robot knows (read from the stored sessions).
+    Children { pin: String },
+    /// Therapist page: a code typed for a child the robot does not know yet, to be checked
+    /// by the rules of a user id (nothing is stored: the child is stored once a session of
+    /// it starts).
+    NewChild { pin: String, user_id: String },
+    /// Therapist page: one child's progress across sessions.
+    Progress { pin: String, user_id: String },
 }
 
 /// The therapist's commands, as `TherapistCommand` defines them.
@@ -168,6 +176,45 @@ pub enum ServerMessage {
     Result(ResultView),
     /// Therapist page only: the action the game manager proposes, or what became of it.
     Proposal(ProposalView),
+    /// Therapist page: the children the robot knows, the most recent first.
+    Children {
+        children: Vec<ChildView>,
+        /// The sessions root, when it does not exist (yet): no session stored there.
+        missing: Option<String>,
+        /// What could not be read (a child may be missing from the list).
+        problems: Vec<String>,
+    },
+    /// Therapist page: a new code passed the rules of a user id.
+    ChildChecked {
+        user_id: String,
+    },
+    /// Therapist page: a child's progress, as the report's HTML body (`child_sessions`).
+    Progress {
+        user_id: String,
+        sessions: usize,
+        html: String,
+    },
+}
+
+/// A child on the therapist page's list.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChildView {
+    /// The child's code (never a name).
+    pub user_id: String,
+    pub sessions: usize,
+    /// The last time any of its session files names, ms since the epoch (the page shows the
+    /// tablet's local date); null when none does.
+    pub last_ms: Option<i64>,
+}
+
+impl ChildView {
+    pub fn of(c: &child_sessions::Child) -> Self {
+        ChildView {
+            user_id: c.user_id.clone(),
+            sessions: c.sessions,
+            last_ms: c.last_ns.map(|ns| ns / 1_000_000),
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -172,9 +172,10 @@ fn check_fields(kind: CommandKind, f: &CommandFields) -> Result<(), String> {
             if f.level.is_some() {
                 return Err("start takes no level".into());
             }
-            match (&f.user_id, f.cluster) {
-                (Some(u), Some(_)) if !u.trim().is_empty() => Ok(()),
-                _ => Err("start needs a user_id and a cluster (-1: the policy's default)".into()),
+            // Without a cluster the policy's default plays (-1); a cluster may still be chosen.
+            match &f.user_id {
+                Some(u) if !u.trim().is_empty() => Ok(()),
+                _ => Err("start needs a user_id (the child's code)".into()),
             }
         }
         CommandKind::OverrideLevel => {

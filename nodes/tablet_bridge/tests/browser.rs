@@ -88,6 +88,14 @@ fn bin_dir() -> PathBuf {
         .expect("the binaries' directory")
 }
 
+/// The target directory (tests/run.sh installs axe-core in it).
+fn target_dir() -> PathBuf {
+    bin_dir()
+        .parent()
+        .map(Path::to_path_buf)
+        .expect("the target directory")
+}
+
 #[test]
 fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
     if std::env::var_os(INNER).is_some() {
@@ -106,6 +114,9 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
             path.display()
         );
     }
+    let Some(axe) = axe_script(&target_dir()) else {
+        return;
+    };
     let shots = screenshot_dir();
     let Some(out) = loopback_netns::rerun_test_inside(
         TEST_NAME,
@@ -113,6 +124,7 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
             (INNER, "1".as_ref()),
             ("ROS_LOCALHOST_ONLY", "1".as_ref()),
             ("TABLET_SCREENSHOT_DIR", shots.as_os_str()),
+            ("QT_AXE_JS", axe.as_os_str()),
         ],
         Duration::from_secs(300),
     ) else {
@@ -126,7 +138,7 @@ fn a_therapist_plays_a_whole_session_with_the_real_suite_on_both_tablets() {
     );
     for line in stderr
         .lines()
-        .filter(|l| l.starts_with("tablet_bridge SIGKILLed"))
+        .filter(|l| l.starts_with("tablet_bridge SIGKILLed") || l.starts_with("whole session: "))
     {
         eprintln!("{line}");
     }
@@ -200,6 +212,8 @@ fn the_therapist_page_says_when_it_is_served_unencrypted() {
                     assert!(text.starts_with("Unencrypted connection"), "{text}");
                     page.screenshot(&screenshot_dir(), "therapist_unencrypted_1280x800")
                         .await;
+                    page.assert_accessible("therapist login, unencrypted bar, 1280x800")
+                        .await;
                 }
             }
             assert_eq!(bridge.interrupt(Duration::from_secs(10)), Some(0));
@@ -211,6 +225,9 @@ fn the_therapist_page_says_when_it_is_served_unencrypted() {
     if browser_missing() {
         return;
     }
+    let Some(axe) = axe_script(&target_dir()) else {
+        return;
+    };
     let shots = screenshot_dir();
     let Some(out) = loopback_netns::rerun_test_inside(
         PLAIN_TEST_NAME,
@@ -218,6 +235,7 @@ fn the_therapist_page_says_when_it_is_served_unencrypted() {
             (PLAIN_INNER, "1".as_ref()),
             ("ROS_LOCALHOST_ONLY", "1".as_ref()),
             ("TABLET_SCREENSHOT_DIR", shots.as_os_str()),
+            ("QT_AXE_JS", axe.as_os_str()),
         ],
         Duration::from_secs(60),
     ) else {
@@ -229,6 +247,336 @@ fn the_therapist_page_says_when_it_is_served_unencrypted() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+const CHILDREN_TEST_NAME: &str =
+    "the_therapist_finds_a_child_among_200_and_prints_their_progress_in_both_languages";
+const CHILDREN_INNER: &str = "TABLET_CHILDREN_TEST_INNER";
+
+/// The bridge alone (no game) over a robot's stored sessions as the suite writes them
+/// (`stored_sessions`: 200 children with a session each, one with 50 sessions whose runs
+/// include a bag cut short and one without a bag, one with a single session), once in English
+/// and once in German, at the tablet's two orientations: the list holds all 202 codes and its
+/// search finds one; the progress of 50, 1 and 0 sessions shows, naming the damaged and the
+/// missing bag; a new code is checked by the bridge; the 50 sessions print to A4. axe-core
+/// checks every page and state.
+#[test]
+fn the_therapist_finds_a_child_among_200_and_prints_their_progress_in_both_languages() {
+    if std::env::var_os(CHILDREN_INNER).is_some() {
+        let runtime = tokio::runtime::Runtime::new().expect("tokio runtime");
+        runtime.block_on(children_inner());
+        return;
+    }
+    if browser_missing() {
+        return;
+    }
+    let Some(axe) = axe_script(&target_dir()) else {
+        return;
+    };
+    let stored = bin_dir().join("stored_sessions");
+    assert!(
+        stored.exists(),
+        "{} is not built: run `cargo build --workspace --bins` first (tests/run.sh does)",
+        stored.display()
+    );
+    let shots = screenshot_dir();
+    let Some(out) = loopback_netns::rerun_test_inside(
+        CHILDREN_TEST_NAME,
+        &[
+            (CHILDREN_INNER, "1".as_ref()),
+            ("ROS_LOCALHOST_ONLY", "1".as_ref()),
+            ("TABLET_SCREENSHOT_DIR", shots.as_os_str()),
+            ("QT_AXE_JS", axe.as_os_str()),
+        ],
+        Duration::from_secs(180),
+    ) else {
+        return;
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "inside the namespace:\n{}\n{stderr}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    for line in stderr
+        .lines()
+        .filter(|l| l.starts_with("printed") || l.starts_with("children and progress: axe"))
+    {
+        eprintln!("{line}");
+    }
+}
+
+/// The words the children test looks for, per language.
+struct Words {
+    lang: &'static str,
+    unlock: &'static str,
+    no_match: &'static str,
+    progress_of: &'static str,
+    no_session: &'static str,
+    empty_code: &'static str,
+}
+
+const ENGLISH: Words = Words {
+    lang: "en",
+    unlock: "Unlock",
+    no_match: "No code matches",
+    progress_of: "Progress of",
+    no_session: "No session of this child",
+    empty_code: "is empty",
+};
+const GERMAN: Words = Words {
+    lang: "de",
+    unlock: "Entsperren",
+    no_match: "Kein Code passt",
+    progress_of: "Verlauf von",
+    no_session: "noch keine Sitzung gespeichert",
+    empty_code: "is empty",
+};
+
+async fn children_inner() {
+    const DRIVER: u16 = 19517;
+    let shots = PathBuf::from(std::env::var_os("TABLET_SCREENSHOT_DIR").expect("dir"));
+    let logs = Logs {
+        dir: tempfile::tempdir().expect("temp dir"),
+    };
+    // In memory where the machine has /dev/shm: the game manager's writer fsyncs every line
+    // (3,500 here: 20 s on this machine's disk, 0.7 s in memory).
+    let shm = Path::new("/dev/shm");
+    let stored = shm
+        .is_dir()
+        .then(|| tempfile::tempdir_in(shm).ok())
+        .flatten();
+    let stored = stored.unwrap_or_else(|| tempfile::tempdir().expect("temp dir"));
+    let root = stored.path().join("sessions");
+    let made = Command::new(bin_dir().join("stored_sessions"))
+        .arg("--root")
+        .arg(&root)
+        .args(["--children", "200", "--child", "child-fifty:50"])
+        .args([
+            "--child",
+            "child-one:1",
+            "--damaged-bag",
+            "2",
+            "--missing-bag",
+            "4",
+        ])
+        .output()
+        .expect("stored_sessions runs");
+    assert!(made.status.success(), "{made:?}");
+    let bridges: Vec<(Guard, u16, &Words)> = [(18100, &ENGLISH), (18101, &GERMAN)]
+        .into_iter()
+        .map(|(port, words)| {
+            let bridge = Guard::spawn(
+                "tablet_bridge",
+                Command::new(env!("CARGO_BIN_EXE_tablet_bridge"))
+                    .args(["--param", &format!("http_bind:=127.0.0.1:{port}")])
+                    .args(["--param", &format!("language:={}", words.lang)])
+                    .arg("--param")
+                    .arg(format!("sessions_root:={}", root.display()))
+                    .env("QT_TABLET_PIN", PIN)
+                    .stdout(logs.file(&format!("bridge_{}.out", words.lang)))
+                    .stderr(logs.file(&format!("bridge_{}.err", words.lang))),
+            );
+            (bridge, port, words)
+        })
+        .collect();
+    let _driver = Guard::spawn(
+        "chromedriver",
+        Command::new("chromedriver")
+            .args([format!("--port={DRIVER}"), "--allowed-ips=127.0.0.1".into()])
+            .env("HOME", logs.dir.path())
+            .stdout(logs.file("chromedriver.log"))
+            .stderr(Stdio::null()),
+    );
+    until("the bridges and chromedriver", WAIT, || async {
+        (port_open(18100) && port_open(18101) && port_open(DRIVER)).then_some(())
+    })
+    .await;
+    let profiles = tempfile::tempdir().expect("profiles");
+    // A browser window per language, each starting in landscape as a tablet might.
+    for (_, port, words) in &bridges {
+        let profile = profiles.path().join(words.lang);
+        let page = Page::open("therapist", DRIVER, &profile, (1280, 800)).await;
+        if words.lang == "en" {
+            page.client
+                .goto(&format!("http://127.0.0.1:{port}/"))
+                .await
+                .expect("goto");
+            page.assert_accessible("index").await;
+        }
+        the_children_in_one_language(&page, *port, words, &shots).await;
+        let _ = page.client.close().await;
+    }
+    eprintln!("children and progress: {}", axe_spent());
+    for (bridge, _, words) in bridges {
+        assert_eq!(
+            bridge.interrupt(Duration::from_secs(10)),
+            Some(0),
+            "{}",
+            logs.read(&format!("bridge_{}.err", words.lang))
+        );
+    }
+}
+
+/// Types `query` into the list's search as a therapist would (an input event per change).
+async fn search(page: &Page, query: &str) {
+    page.js(
+        "const e = document.getElementById('child-search'); e.value = arguments[0]; \
+         e.dispatchEvent(new Event('input')); return true;",
+        vec![json!(query)],
+    )
+    .await;
+}
+
+/// The therapist page in one language: the list, a search, the progress of 50, 1 and 0
+/// sessions, in landscape and portrait; then the child page.
+async fn the_children_in_one_language(page: &Page, port: u16, words: &Words, shots: &Path) {
+    let lang = words.lang;
+    let base = format!("http://127.0.0.1:{port}");
+    page.client
+        .goto(&format!("{base}/therapist"))
+        .await
+        .expect("goto");
+    page.wait_text("#login", words.unlock, WAIT).await;
+    page.assert_accessible(&format!("therapist login, {lang}"))
+        .await;
+    page.type_into("#pin", PIN).await;
+    page.click("#login").await;
+    page.wait_count("#children li", 202, WAIT).await;
+    // The most recent first: the fifty-session child played last.
+    assert_eq!(
+        page.text("#children li:first-child .code").await,
+        "child-fifty"
+    );
+    page.screenshot(shots, &format!("therapist_children_{lang}_1280x800"))
+        .await;
+    page.assert_accessible(&format!("therapist, 202 children, {lang}, 1280x800"))
+        .await;
+    search(page, "zzz").await;
+    page.wait_count("#children li", 0, WAIT).await;
+    page.wait_text("#children-empty", words.no_match, WAIT)
+        .await;
+    page.assert_accessible(&format!("therapist, no code matches, {lang}"))
+        .await;
+    search(page, "FIFTY").await;
+    page.wait_count("#children li", 1, WAIT).await;
+    page.click("#children button[data-user=\"child-fifty\"]")
+        .await;
+    page.wait_text("#chosen-code", "child-fifty", WAIT).await;
+
+    // Fifty sessions: a row each, both figures, the damaged and the missing bag named.
+    page.click("#show-progress").await;
+    let article = "#progress article[data-user=\"child-fifty\"][data-sessions=\"50\"]";
+    page.wait_count(article, 1, WAIT).await;
+    assert!(
+        page.text("#progress h2")
+            .await
+            .starts_with(words.progress_of)
+    );
+    assert_eq!(page.count("#progress tbody tr").await, 50);
+    assert_eq!(page.count("#progress figure svg[role=img]").await, 2);
+    let problems = page.text("#progress .problems").await;
+    assert!(
+        problems.contains("run-002/session.mcap is damaged") && problems.contains("no bag in"),
+        "{problems}"
+    );
+    page.screenshot(
+        shots,
+        &format!("therapist_progress_50_sessions_{lang}_1280x800"),
+    )
+    .await;
+    page.assert_accessible(&format!(
+        "therapist, progress of 50 sessions, {lang}, 1280x800"
+    ))
+    .await;
+    if lang == "en" {
+        let pdf = page
+            .print_pdf(shots, "therapist_progress_50_sessions")
+            .await;
+        assert!(pdf.starts_with(b"%PDF"), "a PDF");
+        let pages = pdf.windows(11).filter(|w| w == b"/Type /Page").count()
+            - pdf.windows(12).filter(|w| w == b"/Type /Pages").count();
+        eprintln!("printed the progress of 50 sessions: {pages} A4 pages");
+        assert!((1..=8).contains(&pages), "{pages} pages");
+    }
+    page.resize(800, 1280).await;
+    page.screenshot(
+        shots,
+        &format!("therapist_progress_50_sessions_{lang}_800x1280"),
+    )
+    .await;
+    page.assert_accessible(&format!(
+        "therapist, progress of 50 sessions, {lang}, 800x1280"
+    ))
+    .await;
+    page.click("#progress-back").await;
+    search(page, "").await;
+    page.wait_count("#children li", 202, WAIT).await;
+    page.screenshot(shots, &format!("therapist_children_{lang}_800x1280"))
+        .await;
+    page.assert_accessible(&format!("therapist, 202 children, {lang}, 800x1280"))
+        .await;
+
+    // One session.
+    page.click("#children button[data-user=\"child-one\"]")
+        .await;
+    page.click("#show-progress").await;
+    page.wait_count(
+        "#progress article[data-user=\"child-one\"][data-sessions=\"1\"]",
+        1,
+        WAIT,
+    )
+    .await;
+    assert_eq!(page.count("#progress tbody tr").await, 1);
+    page.assert_accessible(&format!(
+        "therapist, progress of 1 session, {lang}, 800x1280"
+    ))
+    .await;
+    page.click("#progress-back").await;
+
+    // A new code: an empty one is refused by the bridge; a good one is chosen, has no session.
+    page.type_into("#new-code", " ").await;
+    page.click("#add-child").await;
+    page.wait_text("#toast", words.empty_code, WAIT).await;
+    page.type_into("#new-code", "child-new").await;
+    page.click("#add-child").await;
+    page.wait_text("#chosen-code", "child-new", WAIT).await;
+    assert_eq!(
+        page.count("#children li").await,
+        203,
+        "the new code on the list"
+    );
+    page.click("#show-progress").await;
+    page.wait_count(
+        "#progress article[data-user=\"child-new\"][data-sessions=\"0\"]",
+        1,
+        WAIT,
+    )
+    .await;
+    assert!(page.text("#progress").await.contains(words.no_session));
+    page.resize(1280, 800).await;
+    page.screenshot(
+        shots,
+        &format!("therapist_progress_0_sessions_{lang}_1280x800"),
+    )
+    .await;
+    page.assert_accessible(&format!(
+        "therapist, progress of 0 sessions, {lang}, 1280x800"
+    ))
+    .await;
+
+    page.client
+        .goto(&format!("{base}/child"))
+        .await
+        .expect("goto");
+    page.wait_count("#prompt:not(:empty)", 1, WAIT).await;
+    page.assert_accessible(&format!("child waiting, {lang}, 1280x800"))
+        .await;
+    page.resize(800, 1280).await;
+    page.screenshot(shots, &format!("child_waiting_{lang}_800x1280"))
+        .await;
+    page.assert_accessible(&format!("child waiting, {lang}, 800x1280"))
+        .await;
 }
 
 /// What the test heard over DDS: every utterance of the robot, the tasks (with how many
@@ -440,9 +788,10 @@ async fn inner() {
             ))
             .arg(format!(
                 "bridge_args:=--param http_bind:=127.0.0.1:{HTTP_PORT} \
-                 --param ws_max_dropped_before_close:=100 \
+                 --param ws_max_dropped_before_close:=100 --param sessions_root:={out} \
                  --param tls_cert_file:={tls}/server.crt --param tls_key_file:={tls}/server.key",
-                tls = tls.display()
+                tls = tls.display(),
+                out = out.display()
             ))
             .env("QT_TABLET_PIN", PIN)
             .stdout(logs.file("launch.out"))
@@ -542,6 +891,7 @@ async fn inner() {
         );
     }
     ears.shell.stop().await;
+    eprintln!("whole session: {}", axe_spent());
 }
 
 /// The two sessions the test played: the whole one (id, score, maximum score) and the one it
@@ -569,11 +919,27 @@ const RUNNING: [&str; 4] = [
     "waiting_for_answer",
 ];
 
-/// Starts a session from the therapist page (clicked again if the very first command went out
-/// before DDS matched the game manager's reader: commands are volatile).
-async fn start_session(therapist: &Page, user: &str, cluster: i32) {
-    therapist.type_into("#user-id", user).await;
-    therapist.type_into("#cluster", &cluster.to_string()).await;
+/// Starts a session from the therapist page for a child not on the list yet: its code added
+/// (checked by the bridge) and chosen, the cluster only when given (under "Advanced"; none:
+/// the policy's default). Clicked again if the very first command went out before DDS matched
+/// the game manager's reader: commands are volatile.
+async fn start_session(therapist: &Page, user: &str, cluster: Option<i32>) {
+    therapist.type_into("#new-code", user).await;
+    therapist.click("#add-child").await;
+    therapist.wait_text("#chosen-code", user, WAIT).await;
+    assert_eq!(
+        therapist
+            .count(&format!(
+                "#children button[aria-pressed=true][data-user=\"{user}\"]"
+            ))
+            .await,
+        1,
+        "the new code is on the list, chosen"
+    );
+    if let Some(cluster) = cluster {
+        therapist.click("#advanced summary").await;
+        therapist.type_into("#cluster", &cluster.to_string()).await;
+    }
     until(
         &format!("the session of {user} to start"),
         Duration::from_secs(60),
@@ -590,6 +956,58 @@ async fn start_session(therapist: &Page, user: &str, cluster: i32) {
         },
     )
     .await;
+}
+
+/// After both sessions: the list shows the two children the robot now knows (one session
+/// each); the therapist picks the first, opens their progress (the whole session's score as
+/// the page counted it, what the robot believes now: not available yet), prints it to A4 and
+/// goes back to the session.
+async fn progress_of_the_first_child(
+    therapist: &Page,
+    session_id: &str,
+    score: i32,
+    max: i32,
+    shots: &Path,
+) {
+    let started = std::time::Instant::now();
+    for child in ["child-7", "child-8"] {
+        let row = format!("#children button[data-user=\"{child}\"] .meta");
+        therapist.wait_text(&row, "1 session", WAIT).await;
+    }
+    therapist
+        .click("#children button[data-user=\"child-7\"]")
+        .await;
+    therapist.wait_text("#chosen-code", "child-7", WAIT).await;
+    therapist.resize(1280, 800).await;
+    therapist.click("#show-progress").await;
+    let article = "#progress article.progress[data-user=\"child-7\"][data-sessions=\"1\"]";
+    therapist.wait_count(article, 1, WAIT).await;
+    let row = format!("#progress tr[data-session=\"{session_id}\"] td.score");
+    assert_eq!(therapist.text(&row).await, format!("{score} / {max}"));
+    assert!(
+        therapist
+            .text("#progress .belief")
+            .await
+            .contains("Not available"),
+        "what the robot believes now"
+    );
+    assert_eq!(therapist.count("#progress figure svg[role=img]").await, 2);
+    therapist
+        .screenshot(shots, "therapist_progress_1_session_1280x800")
+        .await;
+    therapist
+        .assert_accessible("therapist, a child's progress (1 session), 1280x800")
+        .await;
+    let pdf = therapist
+        .print_pdf(shots, "therapist_progress_1_session")
+        .await;
+    assert!(pdf.starts_with(b"%PDF"), "a PDF");
+    therapist.click("#progress-back").await;
+    therapist.wait_count("#columns:not(.hidden)", 1, WAIT).await;
+    eprintln!(
+        "whole session: the list, the progress and its PDF took {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 }
 
 /// The session the therapist page shows.
@@ -666,6 +1084,7 @@ async fn bridge_killed_and_back(
     .await;
     let offline_after = killed.elapsed();
     child.screenshot(shots, "child_offline_800x1280").await;
+    child.assert_accessible("child offline, 800x1280").await;
     until("the launcher restarted the bridge", WAIT, || async {
         bridge_pid(logs).filter(|p| *p != pid).map(|_| ())
     })
@@ -804,6 +1223,9 @@ async fn answer_proposal(
     if k == 1 {
         therapist
             .screenshot(shots, "therapist_proposal_1280x800")
+            .await;
+        therapist
+            .assert_accessible("therapist, a proposal open, 1280x800")
             .await;
     }
     if k == 7 {
@@ -1136,6 +1558,9 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     therapist
         .screenshot(shots, "therapist_login_1280x800")
         .await;
+    therapist
+        .assert_accessible("therapist login, 1280x800")
+        .await;
     therapist.type_into("#pin", "1111").await;
     therapist.click("#login").await;
     therapist.wait_text("#login-error", "wrong PIN", WAIT).await;
@@ -1143,6 +1568,18 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     therapist.click("#login").await;
     // The game manager announces itself (transient-local IDLE) once the policy serves.
     therapist.wait_text("#phase", "idle", STARTUP).await;
+    // A fresh install: no child is stored yet, and a session cannot start without one.
+    therapist
+        .wait_text(
+            "#children-empty",
+            "No child has played on this robot yet",
+            WAIT,
+        )
+        .await;
+    assert_eq!(therapist.count("#start[disabled]").await, 1);
+    therapist
+        .assert_accessible("therapist idle, no child yet, 1280x800")
+        .await;
 
     child
         .client
@@ -1150,9 +1587,24 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
         .await
         .expect("goto");
     child.wait_text("#prompt", "Listen to QT", WAIT).await;
+    child.assert_accessible("child waiting, 1280x800").await;
 
-    start_session(&therapist, "child-7", 0).await;
+    // The child picked, no cluster typed: the policy's default plays (-1 in the command).
+    start_session(&therapist, "child-7", None).await;
     let session_id = session_shown(&therapist).await;
+    let start = ears.with(|h| {
+        h.commands
+            .iter()
+            .find(|c| c.command == TherapistCommand::START && c.session_id == session_id)
+            .cloned()
+    });
+    assert_eq!(
+        start.map(|c| (c.user_id, c.user_model_cluster)),
+        Some(("child-7".to_string(), -1))
+    );
+    therapist
+        .wait_text("#g-user", "child-7 (default cluster)", WAIT)
+        .await;
     let mut tasks: Vec<(TabletTask, Vec<String>)> = Vec::new();
     let (mut score, mut max) = (0i32, 0i32);
     for k in 1..=10 {
@@ -1185,6 +1637,10 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
             therapist.click("#pause").await;
             therapist.wait_text("#phase", "paused", WAIT).await;
             child.wait_text("#prompt", "Pause", WAIT).await;
+            child.assert_accessible("child paused, 1280x800").await;
+            therapist
+                .assert_accessible("therapist paused, 1280x800")
+                .await;
             therapist.click("#override-3").await;
             therapist.wait_text("#g-status", "set to L3", WAIT).await;
             therapist.click("#resume").await;
@@ -1206,6 +1662,7 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
         if k == 1 {
             tap(&child, &tapped[..2]).await;
             child.screenshot(shots, "child_task_partial_1280x800").await;
+            child.assert_accessible("child answering, 1280x800").await;
             tap(&child, &tapped[2..]).await;
             child.screenshot(shots, "child_task_filled_1280x800").await;
         } else if k == 6 {
@@ -1264,6 +1721,9 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
             .await;
         if k == 1 {
             therapist.screenshot(shots, "therapist_1280x800").await;
+            therapist
+                .assert_accessible("therapist, a session running, 1280x800")
+                .await;
         }
         tasks.push((task, said));
     }
@@ -1289,6 +1749,10 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     );
     child.screenshot(shots, "child_finished_800x1280").await;
     therapist.screenshot(shots, "therapist_800x1280").await;
+    child.assert_accessible("child finished, 800x1280").await;
+    therapist
+        .assert_accessible("therapist, the session finished, 800x1280")
+        .await;
 
     // Exactly the ten real answers crossed, as tapped.
     let answers = ears.with(|h| h.answers.clone());
@@ -1356,7 +1820,8 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     // A second session, emergency-stopped while its first proposal waits: the robot goes
     // silent at once (an empty utterance, then nothing), the proposal is withdrawn, and the
     // page shows both.
-    start_session(&therapist, "child-8", 1).await;
+    // Another child with a cluster chosen under "Advanced".
+    start_session(&therapist, "child-8", Some(1)).await;
     let stopped = session_shown(&therapist).await;
     assert_ne!(stopped, session_id);
     therapist
@@ -1385,6 +1850,10 @@ async fn session(shots: &Path, ears: &Ears, logs: &Logs) -> Sessions {
     therapist
         .screenshot(shots, "therapist_emergency_stopped_800x1280")
         .await;
+    therapist
+        .assert_accessible("therapist emergency-stopped, proposal withdrawn, 800x1280")
+        .await;
+    progress_of_the_first_child(&therapist, &session_id, score, max, shots).await;
 
     for page in [therapist, child] {
         let _ = page.client.close().await;

@@ -1,6 +1,7 @@
 //! Helpers of the browser test: child processes killed on drop, deadlines on every wait, the
 //! robot's CA trusted the way a tablet trusts it (an NSS database, Chromium's trust store on
-//! Linux), and a WebDriver page. (The loopback namespace every DDS process runs in is
+//! Linux), a WebDriver page, and axe-core (Deque's accessibility engine) run inside it against
+//! WCAG 2.1 AA and axe's best practices. (The loopback namespace every DDS process runs in is
 //! `loopback_netns`.)
 
 use fantoccini::{Client, ClientBuilder, Locator};
@@ -273,16 +274,23 @@ impl Page {
                 .await
                 .unwrap_or_else(|e| panic!("{}: resizing: {e}", self.name))
         };
-        set(w, h).await;
-        let inner = self
-            .js("return [window.innerWidth, window.innerHeight];", vec![])
-            .await;
-        let got = |i: usize| inner[i].as_u64().unwrap_or(0) as u32;
-        set(w + w.saturating_sub(got(0)), h + h.saturating_sub(got(1))).await;
-        let inner = self
-            .js("return [window.innerWidth, window.innerHeight];", vec![])
-            .await;
-        assert_eq!(inner, json!([w, h]), "{}: viewport", self.name);
+        // The window's frame is what the window has beyond the viewport; a loaded machine
+        // may report a size before the window settled, so measure and set again.
+        let (mut ww, mut wh) = (w, h);
+        let mut inner = json!(null);
+        for _ in 0..5 {
+            set(ww, wh).await;
+            inner = self
+                .js("return [window.innerWidth, window.innerHeight];", vec![])
+                .await;
+            if inner == json!([w, h]) {
+                return;
+            }
+            let got = |i: usize| inner[i].as_u64().unwrap_or(0) as u32;
+            ww = (ww + w).saturating_sub(got(0));
+            wh = (wh + h).saturating_sub(got(1));
+        }
+        panic!("{}: viewport {inner} after resizing to {w}x{h}", self.name);
     }
 
     /// Saves a PNG screenshot of the viewport as `dir/stem.png`.
@@ -348,5 +356,108 @@ impl Logs {
             }
         }
         s
+    }
+}
+
+/// The rules axe runs: WCAG 2.0 and 2.1, levels A and AA (what EN 301 549 asks of software),
+/// and axe's best practices (one main landmark, a level-one heading, content in landmarks).
+const AXE_TAGS: [&str; 5] = ["wcag2a", "wcag2aa", "wcag21a", "wcag21aa", "best-practice"];
+
+/// Where axe-core's script is, as `tests/run.sh` installs it from the npm registry (the
+/// version pinned in `nodes/tablet_bridge/tests/axe/package-lock.json`): `$QT_AXE_JS`, or
+/// `axe-core/` in `target_dir`; None (after saying why) where it is not installed and the
+/// tests may skip. The test passes it to its run inside the namespace as `QT_AXE_JS`.
+pub fn axe_script(target_dir: &Path) -> Option<PathBuf> {
+    let path = std::env::var_os("QT_AXE_JS").map_or_else(
+        || target_dir.join("axe-core/node_modules/axe-core/axe.min.js"),
+        PathBuf::from,
+    );
+    if path.is_file() {
+        return Some(path);
+    }
+    loopback_netns::skip_or_fail(&format!(
+        "axe-core is not installed ({} is missing); tests/run.sh installs it with npm ci from \
+         nodes/tablet_bridge/tests/axe/",
+        path.display()
+    ));
+    None
+}
+
+/// axe-core's runs in this process and the time they took (µs), printed by the tests.
+static AXE_RUNS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+static AXE_MICROS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// `axe-core: N runs, S s` so far in this process.
+pub fn axe_spent() -> String {
+    use std::sync::atomic::Ordering::Relaxed;
+    format!(
+        "axe-core: {} runs, {:.1} s",
+        AXE_RUNS.load(Relaxed),
+        AXE_MICROS.load(Relaxed) as f64 / 1e6
+    )
+}
+
+/// axe-core's script, read once from `$QT_AXE_JS`.
+fn axe_source() -> &'static str {
+    static SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    SOURCE.get_or_init(|| {
+        let path = std::env::var_os("QT_AXE_JS").expect("QT_AXE_JS names axe.min.js");
+        std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", Path::new(&path).display()))
+    })
+}
+
+impl Page {
+    /// Runs axe-core on the page as it is now and panics naming every violation (rule,
+    /// impact, the elements and why) of WCAG 2.1 A/AA and axe's best practices; `state` says
+    /// which page and state it was (e.g. `therapist, 50 sessions, de, 800x1280`). The script is
+    /// injected once per document.
+    pub async fn assert_accessible(&self, state: &str) {
+        let started = Instant::now();
+        let present = self
+            .js("return typeof window.axe === 'object';", vec![])
+            .await;
+        if present != json!(true) {
+            self.js(&format!("{};\nreturn true;", axe_source()), vec![])
+                .await;
+        }
+        let script = r#"
+            const [tags, done] = arguments;
+            axe.run(document, { runOnly: { type: "tag", values: tags } })
+              .then((r) => done(r.violations.map((v) => ({
+                id: v.id, impact: v.impact, help: v.help,
+                nodes: v.nodes.slice(0, 5).map((n) => n.target.join(" ") + ": " +
+                  (n.failureSummary || "").replace(/\s+/g, " ")),
+                count: v.nodes.length }))))
+              .catch((e) => done([{ id: "axe-error", impact: "", help: String(e), nodes: [], count: 1 }]));
+        "#;
+        let v = self
+            .client
+            .execute_async(script, vec![json!(AXE_TAGS)])
+            .await
+            .unwrap_or_else(|e| panic!("{}: axe-core did not run ({state}): {e}", self.name));
+        let violations = v.as_array().cloned().unwrap_or_default();
+        let spent = u64::try_from(started.elapsed().as_micros()).unwrap_or(u64::MAX);
+        AXE_RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        AXE_MICROS.fetch_add(spent, std::sync::atomic::Ordering::Relaxed);
+        assert!(
+            violations.is_empty(),
+            "{}: {} accessibility rule(s) violated ({state}):\n{}",
+            self.name,
+            violations.len(),
+            serde_json::to_string_pretty(&violations).unwrap_or_default()
+        );
+    }
+
+    /// The page printed to PDF (A4 portrait, as a tablet's print dialog gives it), saved as
+    /// `dir/stem.pdf`; returns the PDF's bytes.
+    pub async fn print_pdf(&self, dir: &Path, stem: &str) -> Vec<u8> {
+        let config = fantoccini::wd::PrintConfiguration::builder()
+            .build()
+            .unwrap_or_else(|e| panic!("{}: print configuration: {e}", self.name));
+        let pdf = self.client.print(config).await;
+        let pdf = pdf.unwrap_or_else(|e| panic!("{}: printing: {e}", self.name));
+        std::fs::write(dir.join(format!("{stem}.pdf")), &pdf).expect("writing a PDF");
+        pdf
     }
 }

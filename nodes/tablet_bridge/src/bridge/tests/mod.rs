@@ -11,6 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 
 mod child;
+mod children;
 mod game;
 mod proposal;
 mod therapist;
