@@ -14,11 +14,21 @@ pub fn answer(read: &StoredRead, root: &Path, language: Language, now_ns: i64) -
     let places = [root.to_path_buf()];
     match read {
         StoredRead::Children => match children(&places) {
-            Ok(list) => ServerMessage::Children {
-                children: list.children.iter().map(ChildView::of).collect(),
-                missing: list.missing.first().map(|p| p.display().to_string()),
-                problems: list.problems,
-            },
+            Ok(list) => {
+                // Not shown on the page (a torn line of a power cut would stay there for
+                // good); a child missing from the list is explained in the log.
+                if let Some(first) = list.problems.first() {
+                    tracing::warn!(
+                        "the list of children: {} stored file(s) not read whole, the first: {first}",
+                        list.problems.len()
+                    );
+                }
+                ServerMessage::Children {
+                    children: list.children.iter().map(ChildView::of).collect(),
+                    missing: list.missing.first().map(|p| p.display().to_string()),
+                    problems: list.problems,
+                }
+            }
             Err(e) => ServerMessage::Rejected {
                 reason: format!("the list of children: {e}"),
             },
