@@ -215,10 +215,18 @@ grep -q "serving the tablet pages over HTTPS" "$run/logs/tablet_bridge.log" ||
 ls "$run"/q_tables/cluster_*.json >/dev/null || fail "no Q-table learned in $run/q_tables"
 (cd /tmp && qt-therapy-report) >"$work/report.out" || fail "qt-therapy-report"
 grep -q "$run" "$work/report.out" && [ -s "$run/report.html" ] || fail "the report of the last run: $(cat "$work/report.out")"
+# The child's progress across the stored runs, kept beside the run so erase must find it.
+grep -q '^    sessions_root: "/var/lib/qt-therapy/sessions"$' /etc/qt-therapy/tablet_bridge.yaml ||
+  fail "the installed tablet_bridge.yaml does not read the children from the service's runs"
+progress=$run/progress-$child.html
+(cd /tmp && qt-therapy-report --user "$child" --output "$progress") >"$work/progress.out" ||
+  fail "qt-therapy-report --user $child"
+grep -q "^$child: 1 session under " "$work/progress.out" && grep -q "Progress of $child" "$progress" ||
+  fail "the progress report of $child: $(cat "$work/progress.out")"
 
 step "a child's data: qt-therapy-data list, export, erase (the service stopped)"
 session=$(basename "$summary" .summary.json)
-user_files=("$run/$session.jsonl" "$run/$session.journal" "$summary" "$run/session.mcap" "$run/report.html")
+user_files=("$run/$session.jsonl" "$run/$session.journal" "$summary" "$run/session.mcap" "$run/report.html" "$progress")
 qt-therapy-data list --user "$child" >"$work/list.out" 2>&1 || { cat "$work/list.out"; fail "qt-therapy-data list"; }
 for f in "${user_files[@]}"; do
   [ -f "$f" ] || fail "no $f after the session"

@@ -64,10 +64,11 @@ fn progress(cli: &Cli, user: &str) -> anyhow::Result<()> {
     for problem in &progress.problems {
         eprintln!("warning: {problem}");
     }
+    let n = progress.sessions.len();
     println!(
-        "{}: {} sessions under {}, progress report {}",
+        "{}: {n} session{} under {}, progress report {}",
         user.as_str(),
-        progress.sessions.len(),
+        if n == 1 { "" } else { "s" },
         cli.sessions_root.display(),
         output.display()
     );
