@@ -275,16 +275,24 @@ impl Page {
                 .unwrap_or_else(|e| panic!("{}: resizing: {e}", self.name))
         };
         // The window's frame is what the window has beyond the viewport; a loaded machine
-        // may report a size before the window settled, so measure and set again.
+        // (or a page just printed) may report a size before the window settled, so read
+        // until two readings agree, then set again.
+        let read = || self.js("return [window.innerWidth, window.innerHeight];", vec![]);
         let (mut ww, mut wh) = (w, h);
         let mut inner = json!(null);
         for _ in 0..5 {
             set(ww, wh).await;
-            inner = self
-                .js("return [window.innerWidth, window.innerHeight];", vec![])
-                .await;
-            if inner == json!([w, h]) {
-                return;
+            inner = read().await;
+            for _ in 0..20 {
+                if inner == json!([w, h]) {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                let again = read().await;
+                if again == inner {
+                    break;
+                }
+                inner = again;
             }
             let got = |i: usize| inner[i].as_u64().unwrap_or(0) as u32;
             ww = (ww + w).saturating_sub(got(0));
