@@ -1047,3 +1047,123 @@ fn what_arrives_twice_is_taken_once() {
     );
     done(&out);
 }
+
+/// What a sequence was, apart from when: the state, the policy's action, the robot's words,
+/// the child's answer, its outcome and score, and whether the game manager set it up itself
+/// (the session file's `policy_fallback`). Not its engagement, which follows how the frames
+/// fell on the clock (the answer's time is compared apart, unscaled).
+#[derive(Debug, PartialEq)]
+struct Played {
+    index: u8,
+    state: (u8, u8, i8),
+    action: u8,
+    level: u8,
+    feedback: u8,
+    policy_fallback: Option<bool>,
+    sequence: Vec<String>,
+    answer: Vec<String>,
+    outcome: i8,
+    timed_out: bool,
+    score: f32,
+}
+
+/// The main job in process with seed 7 at `time_scale`: each sequence as played, each answer's
+/// time as the tablet reported it divided by the time scale, and each result's engagement.
+fn played_at(time_scale: f64) -> (Vec<Played>, Vec<f64>, Vec<f32>) {
+    let out = out_dir(&format!("time_scale_{time_scale}"));
+    let setup = Setup {
+        time_scale,
+        ..Setup::default()
+    };
+    // One session id for both (the game manager and the child key their draws by it).
+    virtual_time(async {
+        let mut suite = Suite::new(&out, setup);
+        suite.start_all();
+        let (code, lines) = suite
+            .run_session(Some("main-job-seed-7"), false, 1)
+            .exit()
+            .await;
+        assert_eq!(code, 0, "{lines:#?}");
+        suite.stop_all().await;
+    });
+    let records = records(&out);
+    let fallback = |index: u8| {
+        records
+            .iter()
+            .find(|r| r["result"]["sequence_index"] == u64::from(index))
+            .and_then(|r| r["policy_fallback"].as_bool())
+    };
+    let results: Vec<SequenceResult> = BagReader::open(&out.join("session.mcap"))
+        .expect("the bag")
+        .messages::<SequenceResult>(SEQUENCE_RESULT.name)
+        .expect("results")
+        .into_iter()
+        .map(|m| m.message)
+        .collect();
+    done(&out);
+    let unscaled = results
+        .iter()
+        .map(|r| f64::from(r.response_time) / time_scale)
+        .collect();
+    let engagement = results.iter().map(|r| r.engagement).collect();
+    let played = results
+        .into_iter()
+        .map(|r| Played {
+            index: r.sequence_index,
+            state: (r.state.level, r.state.feedback, r.state.previous_score),
+            action: r.action,
+            level: r.level,
+            feedback: r.feedback,
+            policy_fallback: fallback(r.sequence_index),
+            sequence: r.sequence,
+            answer: r.answer,
+            outcome: r.outcome,
+            timed_out: r.timed_out,
+            score: r.activity_result,
+        })
+        .collect();
+    (played, unscaled, engagement)
+}
+
+#[test]
+fn the_same_seed_plays_the_same_session_at_any_time_scale() {
+    // The main job at time_scale 0.05 and at 0.02: every frame, answer and robot step falls
+    // elsewhere on the clock, and the same seed must play the same session: the same states,
+    // actions, words, answers, outcomes and scores, every sequence in the session file; the
+    // child's answer times drawn at 1x and scaled. The engagement differs (other frames,
+    // averaged over other seconds) and is only printed.
+    let (base, base_times, base_engagement) = played_at(0.05);
+    let (fast, fast_times, fast_engagement) = played_at(0.02);
+    for (scale, run) in [(0.05, &base), (0.02, &fast)] {
+        assert!(
+            run.len() == 10 && run.iter().all(|p| p.policy_fallback.is_some()),
+            "time_scale {scale}: {} sequences ({} in the session file)",
+            run.len(),
+            run.iter().filter(|p| p.policy_fallback.is_some()).count()
+        );
+    }
+    assert_eq!(
+        base, fast,
+        "time_scale 0.05 (left) and 0.02 (right) played different sessions"
+    );
+    let times = base_times.iter().zip(&fast_times);
+    assert!(
+        times.clone().all(|(a, b)| (a - b).abs() < 1e-3),
+        "answer times (s, unscaled) at 0.05 and 0.02: {:?}",
+        times.collect::<Vec<_>>()
+    );
+    for (i, p) in base.iter().enumerate() {
+        eprintln!(
+            "seq {:2}: L{} F{} {} score {:+}, answer time {:5.2} s unscaled | E {:+.2} at 0.05, \
+             {:+.2} at 0.02",
+            p.index,
+            p.level,
+            p.feedback,
+            if p.outcome > 0 { "right" } else { "wrong" },
+            p.score,
+            base_times[i],
+            base_engagement[i],
+            fast_engagement.get(i).copied().unwrap_or(f32::NAN),
+        );
+    }
+}

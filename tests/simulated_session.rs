@@ -6,8 +6,8 @@
 //! whole, the policy's Q-table carried over; the game manager's own respawn takes the session
 //! over from its files and goes on at the therapist's resume, nothing played or done twice.
 //! And five sessions back to back (the soak's short version): every reliable message counted,
-//! nothing lost, duplicated or growing. And the main job's session again at another time scale:
-//! the same seed and session id play the same session.
+//! nothing lost, duplicated or growing. (The same seed at two time scales is played in process:
+//! tests/in_process.rs.)
 
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::{
@@ -26,7 +26,7 @@ static SUITE: Mutex<()> = Mutex::new(());
 #[test]
 fn a_whole_simulated_session_over_dds() {
     let _one = SUITE.lock().unwrap_or_else(|e| e.into_inner());
-    let Some(job) = main_job() else {
+    let Some(job) = run_main_job(0.05, "simulated_session") else {
         return;
     };
     let (out, launch_stdout) = (&job.out, &job.launch_stdout);
@@ -136,47 +136,14 @@ fn a_whole_simulated_session_over_dds() {
     let _ = std::fs::remove_dir_all(out);
 }
 
-/// The session id the main job plays in these tests. The game manager draws a session's
-/// sequences from (seed, session id) and the simulated child its answers from (seed, session
-/// id, sequence index), so one id and one seed make one session.
-const MAIN_JOB_SESSION: &str = "main-job-seed-7";
-
 /// One run of the main job's launch file (seed 7, cluster 0) in a loopback namespace: its
-/// output directory, what the script printed, and what each sequence was.
+/// output directory and what the script printed.
 struct MainJobRun {
     out: std::path::PathBuf,
     launch_stdout: String,
-    /// The console's lines (its stdout.log), kept: a test may delete `out`.
-    console: String,
-    played: Vec<Played>,
-    /// Each sequence's mean expected engagement: printed, not compared.
-    engagement: Vec<f32>,
-    /// Each answer's time as the child's tablet reported it, divided by the time scale.
-    unscaled_response_s: Vec<f64>,
-    /// Each decision's Q-values (a1..a5) by step: printed, not compared (the reward's E term
-    /// moves them with the engagement).
-    q_values: std::collections::BTreeMap<u8, Vec<f64>>,
 }
 
-/// What a sequence was, apart from when: the state, the policy's action, the robot's words,
-/// the child's answer, its outcome and score. Not its engagement, which follows how the
-/// frames fell on the wall clock (the answer's time is compared apart, unscaled).
-#[derive(Debug, PartialEq)]
-struct Played {
-    index: u8,
-    state: (u8, u8, i8),
-    action: u8,
-    level: u8,
-    feedback: u8,
-    /// From the session file (None: no record of it there).
-    policy_fallback: Option<bool>,
-    sequence: Vec<String>,
-    answer: Vec<String>,
-    outcome: i8,
-    timed_out: bool,
-    score: f32,
-}
-
+/// None where namespaces cannot be made.
 fn run_main_job(time_scale: f64, dir: &str) -> Option<MainJobRun> {
     let launch = workspace_bin("launch");
     let bin = launch.parent().expect("target dir").display().to_string();
@@ -185,159 +152,14 @@ fn run_main_job(time_scale: f64, dir: &str) -> Option<MainJobRun> {
     std::fs::create_dir_all(&out).expect("out dir");
     let o = out.display();
     let script = format!(
-        "{} launch_scripts/simulated_session.launch.yaml --log-dir {o}/logs bin:={bin} out:={o} time_scale:={time_scale} cluster:=0 console_args:='--session {MAIN_JOB_SESSION}' > {o}/stdout.log 2> {o}/stderr.log; echo \"launch_exit=$?\"",
+        "{} launch_scripts/simulated_session.launch.yaml --log-dir {o}/logs bin:={bin} out:={o} time_scale:={time_scale} cluster:=0 > {o}/stdout.log 2> {o}/stderr.log; echo \"launch_exit=$?\"",
         launch.display()
     );
     let result = run_in_loopback_netns(&script, Duration::from_secs(240))?;
-    // The session file says which sequences the game manager set up itself (policy fallback).
-    let records = suite_tests::json_lines(
-        &std::fs::read_to_string(out.join(format!("{MAIN_JOB_SESSION}.jsonl"))).unwrap_or_default(),
-    );
-    let fallback = |index: u8| {
-        records
-            .iter()
-            .find(|r| r["result"]["sequence_index"] == u64::from(index))
-            .and_then(|r| r["policy_fallback"].as_bool())
-    };
-    let bag = bag_file::BagReader::open(&out.join("session.mcap"));
-    let results: Vec<SequenceResult> = bag
-        .as_ref()
-        .ok()
-        .and_then(|r| r.messages::<SequenceResult>(SEQUENCE_RESULT.name).ok())
-        .map(|m| m.into_iter().map(|m| m.message).collect())
-        .unwrap_or_default();
-    let q_values = bag
-        .as_ref()
-        .ok()
-        .and_then(|r| r.messages::<Decision>(DECISION.name).ok())
-        .map(|m| {
-            m.into_iter()
-                .map(|m| m.message)
-                .filter(|d| d.session_id == MAIN_JOB_SESSION)
-                .map(|d| (d.step, d.q_values))
-                .collect()
-        })
-        .unwrap_or_default();
-    let console = std::fs::read_to_string(out.join("stdout.log")).unwrap_or_default();
     Some(MainJobRun {
         out,
         launch_stdout: String::from_utf8_lossy(&result.stdout).to_string(),
-        console,
-        engagement: results.iter().map(|r| r.engagement).collect(),
-        q_values,
-        unscaled_response_s: results
-            .iter()
-            .map(|r| f64::from(r.response_time) / time_scale)
-            .collect(),
-        played: results
-            .into_iter()
-            .map(|r| Played {
-                index: r.sequence_index,
-                state: (r.state.level, r.state.feedback, r.state.previous_score),
-                action: r.action,
-                level: r.level,
-                feedback: r.feedback,
-                policy_fallback: fallback(r.sequence_index),
-                sequence: r.sequence,
-                answer: r.answer,
-                outcome: r.outcome,
-                timed_out: r.timed_out,
-                score: r.activity_result,
-            })
-            .collect(),
     })
-}
-
-/// The main job at time_scale 0.05, run once for the two tests that read it (whichever asks
-/// first runs it, holding `SUITE`). None where namespaces cannot be made.
-fn main_job() -> Option<&'static MainJobRun> {
-    static RUN: std::sync::OnceLock<Option<MainJobRun>> = std::sync::OnceLock::new();
-    RUN.get_or_init(|| run_main_job(0.05, "simulated_session"))
-        .as_ref()
-}
-
-/// Same seed, same session, however the machine is loaded (issue 33, item 5): the main job
-/// again at time_scale 0.02, so every frame, answer and robot step falls elsewhere on the wall
-/// clock, plays the same session as at 0.05: the same states, actions, words, answers,
-/// outcomes and scores. The engagement values differ (they are the faces of other frames,
-/// averaged over other seconds) and are only printed. Before the child's draws were keyed, its
-/// answers shared one stream with its frames, and this failed.
-#[test]
-fn the_same_seed_plays_the_same_session_at_any_time_scale() {
-    let _one = SUITE.lock().unwrap_or_else(|e| e.into_inner());
-    let Some(base) = main_job() else {
-        return;
-    };
-    let Some(fast) = run_main_job(0.02, "simulated_session_fast") else {
-        return;
-    };
-    let log = |run: &MainJobRun| format!("{}\nconsole:\n{}", run.launch_stdout, run.console);
-    for run in [base, &fast] {
-        assert!(
-            run.launch_stdout.contains("launch_exit=0")
-                && run.played.len() == 10
-                && run.played.iter().all(|p| p.policy_fallback.is_some()),
-            "{} sequences ({} in the session file) in {}: {}",
-            run.played.len(),
-            run.played
-                .iter()
-                .filter(|p| p.policy_fallback.is_some())
-                .count(),
-            run.out.display(),
-            log(run)
-        );
-    }
-    // How far each greedy decision was from another action (its Q-value minus the best other
-    // allowed one's: a1..a3 at the first step), and how far the two runs' Q-values were apart.
-    let margin = |step: u8, q: &[f64], action: u8| {
-        let allowed = if step == 1 { 3 } else { q.len() };
-        let other = (0..allowed)
-            .filter(|&k| k != usize::from(action))
-            .map(|k| q[k])
-            .fold(f64::NEG_INFINITY, f64::max);
-        q.get(usize::from(action)).map_or(f64::NAN, |c| c - other)
-    };
-    for (i, p) in base.played.iter().enumerate() {
-        let (qa, qb) = (base.q_values.get(&p.index), fast.q_values.get(&p.index));
-        let apart = qa.zip(qb).map_or(f64::NAN, |(a, b)| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max)
-        });
-        eprintln!(
-            "seq {:2}: L{} F{} {} score {:+}, answer time {:5.2} s unscaled | E {:+.2} at 0.05, \
-             {:+.2} at 0.02 | Q margin {:.3}, Q apart {:.4}",
-            p.index,
-            p.level,
-            p.feedback,
-            if p.outcome > 0 { "right" } else { "wrong" },
-            p.score,
-            base.unscaled_response_s[i],
-            base.engagement[i],
-            fast.engagement.get(i).copied().unwrap_or(f32::NAN),
-            qa.map_or(f64::NAN, |q| margin(p.index, q, p.action)),
-            apart,
-        );
-    }
-    assert_eq!(
-        base.played,
-        fast.played,
-        "time_scale 0.05 (left) and 0.02 (right) played different sessions\n0.05: {}\n0.02: {}",
-        log(base),
-        log(&fast)
-    );
-    // The child's answer times, drawn at 1x and scaled: the same draws.
-    let times = base
-        .unscaled_response_s
-        .iter()
-        .zip(&fast.unscaled_response_s);
-    assert!(
-        times.clone().all(|(a, b)| (a - b).abs() < 1e-3),
-        "answer times (s, unscaled) at 0.05 and 0.02: {:?}",
-        times.collect::<Vec<_>>()
-    );
-    let _ = std::fs::remove_dir_all(&fast.out);
 }
 
 /// The soak's short version (bench/soak/soak.sh runs the long one): five sessions back to
