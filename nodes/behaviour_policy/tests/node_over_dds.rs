@@ -2,8 +2,10 @@
 //! unknown cluster, a cluster whose Q-table file is corrupt, states outside the space, NaN
 //! engagement and a result out of place in its session are refused with a clear error, the
 //! corrupt file is never written, and the node keeps serving the good cluster exactly as the
-//! in-process policy does. DDS multicasts, so the test runs itself again inside a private
-//! loopback-only network namespace (tests/loopback-netns), where it starts the node.
+//! in-process policy does; with per-user tables it makes and teaches the user's own table. DDS
+//! multicasts, so each runs itself again inside a private loopback-only network namespace
+//! (tests/loopback-netns), where it starts the node. And the learn-first gate (a request held
+//! for the result it follows) through the node's own loop on the in-process bus.
 
 use behaviour_policy::{BehaviourPolicyParams, PersistentPolicy};
 use q_learning::messages::transition;
@@ -60,34 +62,20 @@ fn with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds(
     );
 }
 
-#[test]
-fn a_decision_waits_for_the_result_it_follows_over_dds() {
-    let Some(stdout) = loopback_netns::test_inside_namespace(
-        "a_decision_waits_for_the_result_it_follows_over_dds",
-        IN_NAMESPACE,
-        Duration::from_secs(120),
-        ordering_inside_the_namespace,
-    ) else {
-        return;
-    };
-    assert!(
-        stdout.contains(
-            "over DDS, in order: the step-2 call sent 600 ms before result 1 was answered after \
-             it, from the table that had learned it (1 updates), as the in-process policy; a \
-             call whose result never came refused after result_wait_s"
-        ),
-        "{stdout}"
-    );
-}
-
 /// Algorithm 1's order (issue 33, item 1): the game manager's request for step 2 can reach the
 /// policy before sequence 1's result (a service and a topic). The call is sent first and the
 /// result 600 ms later: the answer must come after the result and be the decision of a table
-/// that has learned it. Before `after_sequence` and the node's wait, it was answered at once
-/// from the table without the result (0 updates).
-fn ordering_inside_the_namespace() {
-    use node_shell::{NoParameters, NodeShell};
-    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+/// that has learned it, as the in-process policy's. Before `after_sequence` and the node's
+/// wait, it was answered at once from the table without the result (0 updates). The node's
+/// own run loop (`node::run`, the code the process runs) on the in-process bus, on the wall
+/// clock: what is tested is the node's gate, which does not need DDS (the DDS shell's service
+/// and topic are tested above and in tests/dds_processes.rs).
+#[test]
+fn a_decision_waits_for_the_result_it_follows() {
+    use node_shell::Bus;
+    use node_shell::clock::Clock;
+    use node_shell::in_process::InProcessBus;
+    use qt_therapy_msgs::topics::{BEHAVIOUR_POLICY_NODE, DECIDE_ACTION, SEQUENCE_RESULT};
 
     let dir = tempfile::tempdir().expect("temp dir");
     let q_tables = dir.path().join("q_tables");
@@ -95,9 +83,15 @@ fn ordering_inside_the_namespace() {
     cluster_0_file()
         .save(&q_tables.join("cluster_0.json"))
         .expect("writes cluster 0");
-    let (mut node, probe_params, log) =
-        start_node(dir.path(), &q_tables, "    result_wait_s: 1.5\n");
-    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+    let node_params = write_node_params(dir.path(), &q_tables, "    result_wait_s: 1.5\n");
+    let options = node_shell::ShellOptions {
+        params_file: Some(node_params),
+        namespace: "/".into(),
+        ..Default::default()
+    };
+    let (node_params, params_path) = options
+        .parameters::<BehaviourPolicyParams>(BEHAVIOUR_POLICY_NODE)
+        .expect("the node's parameters");
 
     // The in-process policy, learning first.
     let params = BehaviourPolicyParams::default();
@@ -122,23 +116,43 @@ fn ordering_inside_the_namespace() {
     let next_state = State::new(2, 0, 2).expect("state after a2 solved");
     let expected_decision = expected.decide(next_state, 2).expect("decides");
 
-    let runtime = tokio::runtime::Builder::new_multi_thread()
+    // The node's log, read after it stopped (its summary of the gate).
+    let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::<u8>::new()));
+    let writer = {
+        let log = log.clone();
+        move || LogLine(log.clone())
+    };
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(writer)
+        .with_ansi(false)
+        .finish();
+    let _logging = tracing::subscriber::set_default(subscriber);
+    let node_log =
+        || String::from_utf8_lossy(&log.lock().unwrap_or_else(|e| e.into_inner())).to_string();
+
+    let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .expect("runtime");
-    runtime.block_on(async {
-        let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
-                .expect("probe node");
-        let decide = std::sync::Arc::new(shell.client(DECIDE_ACTION).expect("client"));
-        let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
+    tokio::task::LocalSet::new().block_on(&runtime, async {
+        let bus = InProcessBus::new(Clock::wall());
+        let (mut policy_bus, policy_stop) = bus.join(BEHAVIOUR_POLICY_NODE).expect("joins");
+        let node = tokio::task::spawn_local(async move {
+            let outcome =
+                behaviour_policy::node::run(&mut policy_bus, node_params, &params_path).await;
+            policy_bus.stop().await;
+            outcome
+        });
+        let (mut probe, _) = bus.join("behaviour_policy_probe").expect("joins");
+        let decide = std::sync::Arc::new(probe.client(DECIDE_ACTION).expect("client"));
+        let results = probe.publisher(SEQUENCE_RESULT).expect("publisher");
         assert!(
-            shell.wait_for_service(&decide, Duration::from_secs(30)).await,
+            probe.wait_for_service(&decide, Duration::from_secs(30)).await,
             "no DecideAction server:\n{}",
             node_log()
         );
         assert!(
-            results.wait_for_subscribers(&shell, Duration::from_secs(30)).await,
+            results.wait_for_subscribers(&probe, Duration::from_secs(30)).await,
             "the node does not subscribe to results"
         );
         let step_two = DecideActionRequest {
@@ -149,7 +163,9 @@ fn ordering_inside_the_namespace() {
         let sent = Instant::now();
         let call = {
             let decide = decide.clone();
-            tokio::spawn(async move { decide.call(step_two, Duration::from_secs(10)).await })
+            tokio::task::spawn_local(
+                async move { decide.call(step_two, Duration::from_secs(10)).await },
+            )
         };
         tokio::time::sleep(Duration::from_millis(600)).await;
         let result_sent = sent.elapsed();
@@ -193,26 +209,39 @@ fn ordering_inside_the_namespace() {
             r.error
         );
         assert!(asked.elapsed() >= Duration::from_millis(1400), "{:?}", asked.elapsed());
-        println!(
+        eprintln!(
             "ordering: result sent {} ms after the call, answered at {} ms",
             result_sent.as_millis(),
             answered.as_millis()
         );
         drop(results);
-        shell.stop().await;
+        probe.stop().await;
+        // As SIGINT asks the process.
+        policy_stop.stop();
+        node.await.expect("the node's task").expect("the node ends cleanly");
     });
-    let status = node.interrupt(Duration::from_secs(20));
     let text = node_log();
-    assert!(status.success(), "the node exited with {status}:\n{text}");
     assert!(
         text.contains("2 held, 1 answered once it was learned, 1 refused after result_wait_s"),
         "{text}"
     );
-    println!(
-        "over DDS, in order: the step-2 call sent 600 ms before result 1 was answered after it, \
-         from the table that had learned it (1 updates), as the in-process policy; a call whose \
-         result never came refused after result_wait_s"
-    );
+}
+
+/// A writer of log lines into a shared buffer (the test's tracing subscriber).
+struct LogLine(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+
+impl std::io::Write for LogLine {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 /// The node process; killed if the test ends early, so no node outlives a failed run.
@@ -323,20 +352,8 @@ fn request(cluster: i32, step: u8, state: BehaviourState) -> DecideActionRequest
 /// Starts `behaviour_policy run` with its Q-tables in `q_tables` (and `extra` lines of
 /// parameters); returns it, the probe node's parameter file and the node's log file.
 fn start_node(dir: &Path, q_tables: &Path, extra: &str) -> (NodeProcess, PathBuf, PathBuf) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let user_models = root.join("nodes/user_model/models/migrave_study_c2.json");
     let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
-    let node_params = dir.join("behaviour_policy.yaml");
-    std::fs::write(
-        &node_params,
-        format!(
-            "behaviour_policy:\n  ros__parameters:\n    user_model_file: {:?}\n    \
-             q_table_dir: {:?}\n{extra}",
-            path(&user_models),
-            path(q_tables)
-        ),
-    )
-    .expect("writes");
+    let node_params = write_node_params(dir, q_tables, extra);
     let probe_params = dir.join("probe.yaml");
     std::fs::write(
         &probe_params,
@@ -353,6 +370,26 @@ fn start_node(dir: &Path, q_tables: &Path, extra: &str) -> (NodeProcess, PathBuf
             .expect("starts behaviour_policy run"),
     );
     (node, probe_params, log)
+}
+
+/// The node's parameter file in `dir`: its Q-tables in `q_tables`, the study's user models
+/// (and `extra` lines of parameters).
+fn write_node_params(dir: &Path, q_tables: &Path, extra: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let user_models = root.join("nodes/user_model/models/migrave_study_c2.json");
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let node_params = dir.join("behaviour_policy.yaml");
+    std::fs::write(
+        &node_params,
+        format!(
+            "behaviour_policy:\n  ros__parameters:\n    user_model_file: {:?}\n    \
+             q_table_dir: {:?}\n{extra}",
+            path(&user_models),
+            path(q_tables)
+        ),
+    )
+    .expect("writes");
+    node_params
 }
 
 /// A probe node's options.
