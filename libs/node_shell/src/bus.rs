@@ -8,6 +8,7 @@
 
 use crate::clock::Clock;
 use crate::drops::DropLog;
+use crate::parameters::{NodeParameters, ParameterChange};
 use crate::tap::Tapped;
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::{Service, Topic};
@@ -106,6 +107,11 @@ pub trait Bus {
         let _ = node;
         self.wait_for_subscribers(outbox, timeout)
     }
+
+    /// Changes to the node's writable parameters asked for over the graph (`ros2 param set`,
+    /// `parameters`), each to be handed to the node's core and answered with what it said.
+    /// `P` is the node's parameter type. The in-process bus has no ROS graph: none come.
+    fn parameter_changes<P: NodeParameters>(&mut self) -> mpsc::Receiver<ParameterChange<P>>;
 
     /// Resolves when the node is asked to stop (SIGINT or SIGTERM over DDS).
     fn shutdown_signal(&self) -> impl Future<Output = ()> + Send + 'static;

@@ -6,6 +6,7 @@ use crate::NodeShell;
 use crate::bus::{Bus, Outbox, ServiceCall, ServiceClient};
 use crate::clock::Clock;
 use crate::drops::DropLog;
+use crate::parameters::{NodeParameters, ParameterChange};
 use crate::tap::Tapped;
 use qt_therapy_msgs::services::ServiceDefinition;
 use qt_therapy_msgs::topics::{Service, Topic};
@@ -103,6 +104,10 @@ impl Bus for NodeShell {
         timeout: Duration,
     ) -> impl Future<Output = bool> {
         self.dds_wait_for_node_subscription(outbox, node, timeout)
+    }
+
+    fn parameter_changes<P: NodeParameters>(&mut self) -> mpsc::Receiver<ParameterChange<P>> {
+        NodeShell::parameter_changes(self)
     }
 
     fn shutdown_signal(&self) -> impl Future<Output = ()> + Send + 'static {

@@ -11,7 +11,9 @@
 //! One module per job: `options` (command line, parameter files), `environment` (domain,
 //! localhost-only), `qos`, `names`, `participant` (start-up), `publish`, `subscribe`,
 //! `services`, `tap`, `heartbeat`, `shutdown` (signals, clean stop), `security`, `dds_watch`,
-//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params`, `graph`
+//! `dds` (NodeShell as a Bus), `in_process`, `clock`, `drops`, `logging`, `params` (the
+//! parameter file), `parameters` and `parameter_services` (the parameters as ROS 2 tools see
+//! and set them), `graph`
 //! (which node owns an endpoint), `foreign` (topics not the suite's), `type_hashes` (the type
 //! hash each endpoint announces); and `instance_lock`, the `instance_lock` library's, which
 //! offline tools use too.
@@ -29,6 +31,8 @@ pub mod in_process;
 pub mod logging;
 mod names;
 mod options;
+mod parameter_services;
+pub mod parameters;
 pub mod params;
 mod participant;
 mod publish;
@@ -39,6 +43,9 @@ mod shutdown;
 mod subscribe;
 pub mod tap;
 pub mod type_hashes;
+
+// `#[derive(DescribedParameters)]` names `::node_shell`, here too.
+extern crate self as node_shell;
 
 pub use bus::{Bus, CallError, Outbox, ServiceCall, ServiceClient};
 pub use clock::Clock;

@@ -91,9 +91,15 @@ fn params_dir(env: Option<std::ffi::OsString>, is_dir: impl Fn(&Path) -> bool) -
 }
 
 /// Parameters of a node that has none of its own.
-#[derive(Debug, Clone, Default, serde::Deserialize)]
+#[derive(Debug, Clone, Default, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoParameters {}
+
+impl crate::parameters::DescribedParameters for NoParameters {
+    fn declared() -> Vec<crate::parameters::Declared> {
+        vec![]
+    }
+}
 
 #[cfg(test)]
 mod tests {

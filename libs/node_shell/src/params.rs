@@ -135,11 +135,23 @@ pub fn apply_overrides(
 }
 
 /// Deserialises a flat parameter map into `P` (which should use `deny_unknown_fields`).
+/// `use_sim_time`, which rclcpp declares on every node and `ros2 param dump` writes, may be
+/// `false`, as ours always is (`parameters::USE_SIM_TIME`); `true` is refused.
 pub fn parameters_from_map<P: DeserializeOwned>(
-    map: Map<String, Value>,
+    mut map: Map<String, Value>,
     path: &Path,
     node: &str,
 ) -> Result<P, ParamsError> {
+    if let Some(sim) = map.remove(crate::parameters::USE_SIM_TIME)
+        && sim != Value::Bool(false)
+    {
+        return Err(ParamsError::Key {
+            path: path.to_path_buf(),
+            node: node.to_string(),
+            key: crate::parameters::USE_SIM_TIME.to_string(),
+            reason: format!("{sim}: the suite's nodes keep the wall clock; only false is accepted"),
+        });
+    }
     let deserializer = Value::Object(map);
     serde_path_to_error::deserialize(deserializer).map_err(|e| {
         let key = e.path().to_string();
@@ -251,6 +263,17 @@ mod tests {
             msg.contains("params/demo.yaml") && msg.contains("min_confidence"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn use_sim_time_false_is_accepted_and_true_refused() {
+        let d = load("demo:\n  ros__parameters:\n    model_file: m\n    min_confidence: 1.0\n    use_sim_time: false\n")
+            .expect("use_sim_time: false, as ros2 param dump writes it");
+        assert_eq!(d.model_file, "m");
+        let e = load("demo:\n  ros__parameters:\n    model_file: m\n    min_confidence: 1.0\n    use_sim_time: true\n")
+            .expect_err("use_sim_time: true");
+        assert!(e.to_string().contains("use_sim_time"), "{e}");
+        assert!(e.to_string().contains("wall clock"), "{e}");
     }
 
     #[test]

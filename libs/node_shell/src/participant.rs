@@ -8,11 +8,12 @@ use crate::drops::DropLog;
 use crate::environment::{domain_id_from_env, localhost_only_from_env};
 use crate::logging::init_logging;
 use crate::options::ShellOptions;
+use crate::parameters::{NodeParameters, ParameterTable};
 use crate::security::{SecurityError, SecurityMode, with_security};
 use anyhow::{Context as _, bail};
 use futures::FutureExt as _;
 use ros2_client::{Context, Node, NodeName, NodeOptions, ServiceMapping};
-use serde::de::DeserializeOwned;
+use std::any::Any;
 use std::net::{IpAddr, Ipv4Addr};
 use std::path::Path;
 use std::sync::Arc;
@@ -32,6 +33,9 @@ pub struct NodeShell {
     // Tasks that own DDS entities: stopped before the participant goes, so RustDDS can
     // remove them cleanly.
     pub(crate) tasks: Vec<tokio::task::JoinHandle<()>>,
+    // The changes the parameter services accepted, for the node's run loop: an
+    // mpsc::Receiver<ParameterChange<P>> of the node's parameter type, until it takes it.
+    pub(crate) parameter_changes: Option<Box<dyn Any + Send>>,
     // Ends the process if RustDDS's threads end; dropped (stopped) before the participant,
     // whose threads end at a clean stop too.
     _dds_watch: Option<crate::dds_watch::ThreadWatch>,
@@ -41,15 +45,18 @@ pub struct NodeShell {
 }
 
 impl NodeShell {
-    /// Sets up logging, reads the node's parameter file into `P`, and joins the ROS 2 graph.
+    /// Sets up logging, reads the node's parameter file into `P`, joins the ROS 2 graph, and
+    /// serves `P`'s parameters through the standard parameter services (`parameters`).
     /// Must run inside a tokio runtime.
-    pub fn start<P: DeserializeOwned>(
+    pub fn start<P: NodeParameters>(
         default_name: &str,
         options: &ShellOptions,
     ) -> anyhow::Result<(NodeShell, P)> {
         let name = options.node_name_or(default_name);
         let sink = init_logging(&name);
         let (params, params_path): (P, _) = options.parameters(default_name)?;
+        let parameter_table = ParameterTable::new(&params)
+            .with_context(|| format!("describing the parameters of {}", params_path.display()))?;
         let service_mapping = match options.service_mapping.to_ascii_lowercase().as_str() {
             "enhanced" => ServiceMapping::Enhanced,
             "cyclone" => ServiceMapping::Cyclone,
@@ -101,8 +108,23 @@ impl NodeShell {
             )
         })?;
         let mut node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(false))
+            .new_node(
+                node_name,
+                // Our own parameter services (`parameter_services`): ros2-client's offer only
+                // use_sim_time.
+                NodeOptions::new()
+                    .enable_rosout(false)
+                    .start_parameter_services(false),
+            )
             .with_context(|| format!("creating node {name}"))?;
+        let (changes_tx, changes_rx) =
+            tokio::sync::mpsc::channel::<crate::parameters::ParameterChange<P>>(4);
+        let parameter_tasks = crate::parameter_services::serve(
+            &mut node,
+            service_mapping,
+            parameter_table,
+            changes_tx,
+        )?;
         let (rosout, rosout_drain) = rosout(&context, &mut node)?;
         let (graph, graph_task) = crate::graph::follow(&context, &mut node)?;
         let spinner = node.spinner().context("starting the node's spinner")?;
@@ -137,6 +159,8 @@ impl NodeShell {
         // Last before the shell owns it: an error above drops the participant, whose threads
         // then end, and that is no reason to exit 70.
         let dds_watch = crate::dds_watch::watch_participant(&name, &rustdds_threads_before);
+        let mut tasks = vec![spinner_task, rosout_drain, graph_task];
+        tasks.extend(parameter_tasks);
         let mut shell = NodeShell {
             node,
             name,
@@ -145,7 +169,8 @@ impl NodeShell {
             shutdown,
             clock: Clock::wall(),
             graph,
-            tasks: vec![spinner_task, rosout_drain, graph_task],
+            tasks,
+            parameter_changes: Some(Box::new(changes_rx)),
             _dds_watch: dds_watch,
             context,
         };
@@ -161,6 +186,29 @@ impl NodeShell {
     /// Counts of dropped input, per topic and reason.
     pub fn drops(&self) -> Arc<DropLog> {
         self.drops.clone()
+    }
+
+    /// The changes to the node's writable parameters that the parameter services accepted
+    /// (`ros2 param set`), for the node's run loop to hand to its core; `P` is the node's
+    /// parameter type, as given to [`NodeShell::start`]. Taken once: a second call, or
+    /// another `P`, gets a channel that never yields.
+    pub fn parameter_changes<P: NodeParameters>(
+        &mut self,
+    ) -> tokio::sync::mpsc::Receiver<crate::parameters::ParameterChange<P>> {
+        let taken = self.parameter_changes.take().and_then(|rx| {
+            rx.downcast::<tokio::sync::mpsc::Receiver<crate::parameters::ParameterChange<P>>>()
+                .ok()
+        });
+        match taken {
+            Some(rx) => *rx,
+            None => {
+                tracing::warn!(
+                    "parameter changes asked for twice, or of another type than the node's \
+                     parameters: none will come"
+                );
+                tokio::sync::mpsc::channel(1).1
+            }
+        }
     }
 
     /// The ROS 2 graph's nodes, as their participants announce them.

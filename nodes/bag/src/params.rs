@@ -1,10 +1,11 @@
 //! The parameters of the two DDS nodes of the `bag` binary, as `params/bag_recorder.yaml`
 //! and `params/bag_player.yaml` hold them; command-line flags override them.
 
-use serde::Deserialize;
+use node_shell::parameters::DescribedParameters;
+use serde::{Deserialize, Serialize};
 
 /// `bag record` (node `bag_recorder`).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, DescribedParameters)]
 #[serde(deny_unknown_fields, default)]
 pub struct RecorderParams {
     /// Topics to record; empty records every topic of the suite.
@@ -35,7 +36,7 @@ impl Default for RecorderParams {
 }
 
 /// `bag play` (node `bag_player`).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, DescribedParameters)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlayerParams {
     /// Speed over the original timing (2.0 plays twice as fast).

@@ -5,28 +5,57 @@
 
 use q_learning::learning::{Learning, LearningConstants, MAX_EPSILON, Mode, Reward};
 
-#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+/// The behaviour policy node's parameters (each key's meaning at length:
+/// `params/behaviour_policy.yaml`).
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    serde::Deserialize,
+    serde::Serialize,
+    node_shell::parameters::DescribedParameters,
+)]
 #[serde(deny_unknown_fields, default)]
 pub struct BehaviourPolicyParams {
+    /// User models (clusters) the Q-tables belong to.
     pub user_model_file: String,
+    /// Directory of the Q-tables, cluster_<k>.json (and user_<id>.json), saved after every
+    /// learned sequence; locked while the node runs.
     pub q_table_dir: String,
+    /// true: every user also gets a table of their own, made from their cluster's at their
+    /// first decision.
     pub per_user_q_tables: bool,
+    /// A cluster without a file gets one pretrained in simulation: epochs (x 100 sessions)
+    /// per run.
     pub pretrain_epochs: i64,
+    /// Pretraining: independent runs; the best over its last epoch is kept.
     pub pretrain_runs: i64,
+    /// Pretraining state: false = PS is the latest result; true = the authors' one-step lag.
     pub pretrain_state_lags_result: bool,
+    /// Real sessions: greedy actions (ties broken at random), still learning; false: softmax.
     pub exploitation_only: bool,
     /// With `exploitation_only`: the share ε of decisions drawn uniformly from the allowed
     /// actions instead of greedily (0: greedy, the default; at most `MAX_EPSILON`).
     pub exploration_epsilon: f64,
+    /// Seed of every random draw (softmax, ties, pretraining).
     pub seed: i64,
+    /// Cluster used when the therapist did not choose one (-1 in the command).
     pub default_cluster: i64,
+    /// Reward F_r: "RE", "RE+bE" or "lE".
     pub reward: String,
+    /// Learning rate alpha.
     pub alpha: f64,
+    /// Discount gamma.
     pub gamma: f64,
+    /// Softmax temperature of an unvisited state.
     pub initial_temperature: f64,
+    /// The temperature never falls below this.
     pub min_temperature: f64,
+    /// The temperature falls by this per counted visit of the state.
     pub temperature_decay: f64,
+    /// Weight beta of engagement in RE + beta E.
     pub beta: f64,
+    /// Weight lambda of engagement in lambda E.
     pub lambda: f64,
     /// How long a decision request waits for the result it follows (`after_sequence`) before
     /// it is refused, in seconds.

@@ -100,6 +100,11 @@ impl EngagementEstimator {
         &self.model
     }
 
+    /// A new `min_confidence` (a change while running): it applies from the next frame.
+    pub fn set_min_confidence(&mut self, min_confidence: f64) {
+        self.min_confidence = min_confidence as f32;
+    }
+
     /// Classifies one frame and counts it; seconds that close are passed to `emit`.
     pub fn on_frame(
         &mut self,

@@ -42,7 +42,7 @@ pub fn estimator(
 /// seconds.
 pub async fn run<B: Bus>(
     bus: &mut B,
-    params: EngagementClassifierParams,
+    mut params: EngagementClassifierParams,
     mut estimator: EngagementEstimator,
 ) -> anyhow::Result<()> {
     tracing::info!(model = %params.model_file, trees = estimator.model().tree_count(), "model loaded");
@@ -50,6 +50,8 @@ pub async fn run<B: Bus>(
     let estimates = bus.publisher(ENGAGEMENT_ESTIMATE)?;
     let seconds = bus.publisher(EXPECTED_ENGAGEMENT)?;
     let mut states = bus.subscribe(GAME_STATE, 16)?;
+    // `ros2 param set` of min_confidence and the ROS4HRI thresholds.
+    let mut changes = bus.parameter_changes::<EngagementClassifierParams>();
     let mut hri = if params.ros4hri {
         Some(Ros4Hri {
             tracked: bus.publisher(PERSONS_TRACKED)?,
@@ -82,6 +84,17 @@ pub async fn run<B: Bus>(
             biased;
             _ = &mut stop => break,
             Some(g) = states.recv() => out.persons.on_game_state(&g),
+            Some(change) = changes.recv() => {
+                let result = params.change(change.parameters.clone());
+                if result.is_ok() {
+                    estimator.set_min_confidence(params.min_confidence);
+                    out.persons.set_thresholds(&params);
+                    tracing::info!(min_confidence = params.min_confidence,
+                        engaged = params.ros4hri_engaged_threshold,
+                        disengaged = params.ros4hri_disengaged_threshold, "parameters changed");
+                }
+                change.respond(result);
+            }
             Some(frame) = frames.recv() => {
                 let face = out.sources.face_frame(&frame);
                 let stamp_ns = face.stamp_ns;

@@ -5,16 +5,21 @@ use crate::aggregate::AggregatorConfig;
 use crate::repair::DecimalRepair;
 use crate::table::{LoadOptions, NeutralLabel};
 use crate::train::TrainParams;
-use serde::Deserialize;
+use node_shell::parameters::DescribedParameters;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// Parameters of the engagement classifier node and its offline tools.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+/// Parameters of the engagement classifier node and its offline tools. `min_confidence` and
+/// the two ROS4HRI thresholds change while the node runs (`ros2 param set`:
+/// [`EngagementClassifierParams::change`]); the rest are read at start-up.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, DescribedParameters)]
 #[serde(deny_unknown_fields, default)]
 pub struct EngagementClassifierParams {
     /// XGBoost JSON model (optionally with the preprocessing attribute).
     pub model_file: String,
-    /// Frames whose OpenFace confidence is below this count as missing.
+    /// Frames whose OpenFace confidence is below this count as missing; a change while
+    /// running applies from the next frame.
+    #[parameter(writable)]
     pub min_confidence: f64,
     /// Exponential smoothing of the per-second value; 1.0 turns it off.
     pub smoothing_alpha: f64,
@@ -46,10 +51,14 @@ pub struct EngagementClassifierParams {
     /// Also publish each camera face as a ROS4HRI person (REP-155): its `anonymous`, its
     /// per-second `engagement_status`, and the tracked and known lists.
     pub ros4hri: bool,
-    /// Smoothed expected engagement at or above this: ENGAGED.
+    /// Smoothed expected engagement at or above this: ENGAGED (a change while running
+    /// applies from the next second).
+    #[parameter(writable)]
     pub ros4hri_engaged_threshold: f64,
     /// At or below this: DISENGAGED; between the two, ENGAGING when it rose since the
-    /// person's last second, DISENGAGING when it fell.
+    /// person's last second, DISENGAGING when it fell (a change while running applies from
+    /// the next second).
+    #[parameter(writable)]
     pub ros4hri_disengaged_threshold: f64,
     /// A person whose face was not seen for this long ends (leaves /humans/persons/tracked
     /// and known; its topics go); the face seen again is a new person, s.
@@ -197,6 +206,27 @@ impl EngagementClassifierParams {
             "> 0",
         )?;
         self.load_options()?;
+        Ok(())
+    }
+
+    /// A change asked for while the node runs (`ros2 param set`): `new` may differ from
+    /// `self` only in `min_confidence` and the ROS4HRI thresholds, and is checked as at
+    /// start-up. On success `self` is `new`; the estimator and the persons take the values
+    /// (`EngagementEstimator::set_min_confidence`, `PersonEngagement::set_thresholds`).
+    pub fn change(&mut self, new: EngagementClassifierParams) -> Result<(), String> {
+        let only_writable = EngagementClassifierParams {
+            min_confidence: new.min_confidence,
+            ros4hri_engaged_threshold: new.ros4hri_engaged_threshold,
+            ros4hri_disengaged_threshold: new.ros4hri_disengaged_threshold,
+            ..self.clone()
+        };
+        if only_writable != new {
+            return Err("only min_confidence, ros4hri_engaged_threshold and \
+                 ros4hri_disengaged_threshold change while the classifier runs"
+                .into());
+        }
+        new.validate().map_err(|e| e.to_string())?;
+        *self = new;
         Ok(())
     }
 

@@ -92,6 +92,12 @@ impl PersonEngagement {
         }
     }
 
+    /// New thresholds (a change while running): levels from the next closed second on.
+    pub fn set_thresholds(&mut self, params: &EngagementClassifierParams) {
+        self.engaged = params.ros4hri_engaged_threshold;
+        self.disengaged = params.ros4hri_disengaged_threshold;
+    }
+
     /// The game's state: a session starting or ending ends every person.
     pub fn on_game_state(&mut self, g: &GameState) {
         let in_session =
@@ -375,6 +381,26 @@ mod tests {
         .map(|l| (person.clone(), *l))
         .collect();
         assert_eq!(got, want);
+    }
+
+    #[test]
+    fn new_thresholds_apply_from_the_next_second() {
+        let mut p = PersonEngagement::new(&params(5.0));
+        let out = p.on_second(&second(1, "cam/0", Some(0.6)));
+        let person = new_persons(&out)[0].clone();
+        assert_eq!(levels(&out), [(person.clone(), EngagementLevel::ENGAGED)]);
+        let mut changed = params(5.0);
+        changed.ros4hri_engaged_threshold = 0.8;
+        changed.ros4hri_disengaged_threshold = 0.0;
+        p.set_thresholds(&changed);
+        // 0.5 is below the new 0.8 (ENGAGED before) and fell: DISENGAGING; -0.1 is below 0.
+        let out = p.on_second(&second(2, "cam/0", Some(0.5)));
+        assert_eq!(
+            levels(&out),
+            [(person.clone(), EngagementLevel::DISENGAGING)]
+        );
+        let out = p.on_second(&second(3, "cam/0", Some(-0.1)));
+        assert_eq!(levels(&out), [(person, EngagementLevel::DISENGAGED)]);
     }
 
     /// A new person: `anonymous` first, then its level, then the lists naming it; a person

@@ -317,3 +317,54 @@ fn a_synthetic_session_matches_the_offline_per_second_computation() {
         }
     }
 }
+
+/// `ros2 param set` while running: the params take a change of the writable keys only (checked
+/// as at start-up), and the estimator applies a new `min_confidence` from the next frame.
+#[test]
+fn a_min_confidence_change_applies_from_the_next_frame() {
+    let mut params = EngagementClassifierParams::default();
+    let mut est = estimator();
+    let mut emit = |_: &EngagementSecond| {};
+    let features = [0.5f32; 32];
+    let frame = |t| FaceFrame {
+        stamp_ns: t,
+        source: 0,
+        detection_success: true,
+        confidence: 0.6,
+        features: &features,
+    };
+    let r = est.on_frame(&frame(0), &mut emit);
+    assert_eq!(r, Ok(FrameOutcome::Missing(MissingReason::LowConfidence)));
+
+    let changed = EngagementClassifierParams {
+        min_confidence: 0.5,
+        ..params.clone()
+    };
+    params.change(changed).expect("a writable key");
+    est.set_min_confidence(params.min_confidence);
+    let r = est.on_frame(&frame(1), &mut emit);
+    assert!(matches!(r, Ok(FrameOutcome::Classified(_))), "{r:?}");
+
+    // Out of range: refused as at start-up, nothing changed.
+    let bad = EngagementClassifierParams {
+        min_confidence: 1.5,
+        ..params.clone()
+    };
+    let e = params.change(bad).expect_err("out of range");
+    assert!(e.contains("min_confidence"), "{e}");
+    assert_eq!(params.min_confidence, 0.5);
+    // Thresholds out of order: refused.
+    let bad = EngagementClassifierParams {
+        ros4hri_engaged_threshold: -0.8,
+        ..params.clone()
+    };
+    let e = params.change(bad).expect_err("disengaged above engaged");
+    assert!(e.contains("ros4hri_disengaged_threshold"), "{e}");
+    // A read-only key: refused.
+    let bad = EngagementClassifierParams {
+        smoothing_alpha: 0.5,
+        ..params.clone()
+    };
+    let e = params.change(bad).expect_err("read-only");
+    assert!(e.contains("only min_confidence"), "{e}");
+}

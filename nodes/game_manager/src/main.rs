@@ -37,22 +37,23 @@ struct RunArgs {
 async fn main() -> anyhow::Result<()> {
     // packaging/deb/build.sh asks each program for its manual pages.
     man_pages::write_if_asked::<Cli>();
-    let Command::Run(args) = Cli::parse().command;
-    let sessions_dir = match &args.sessions_dir {
-        Some(dir) => dir.clone(),
-        None => {
-            let (params, _): (GameManagerParams, _) = args.shell.parameters(NODE)?;
-            params.files.sessions_dir.into()
-        }
-    };
+    let Command::Run(mut args) = Cli::parse().command;
+    if let Some(dir) = &args.sessions_dir {
+        // As the parameter's override, so the node reads it, and ROS 2 tools see it, as
+        // sessions_dir (a JSON string is a YAML string, whatever the path looks like).
+        let value = serde_json::to_string(&dir.display().to_string())?;
+        args.shell
+            .param_overrides
+            .push(format!("sessions_dir:={value}"));
+    }
+    let (params, _): (GameManagerParams, _) = args.shell.parameters(NODE)?;
+    let sessions_dir = PathBuf::from(&params.files.sessions_dir);
     // Held while the node runs: a second game manager on the same directory would recover
     // this one's session and write its files too. Taken before joining the graph, so a
     // refused copy never beats under our name.
     let _sessions_dir =
         InstanceLock::acquire(&sessions_dir, NODE, "session files").context("sessions_dir")?;
-    let (mut shell, mut params): (NodeShell, GameManagerParams) =
-        NodeShell::start(NODE, &args.shell)?;
-    params.files.sessions_dir = sessions_dir.display().to_string();
+    let (mut shell, params): (NodeShell, GameManagerParams) = NodeShell::start(NODE, &args.shell)?;
     // Parameter errors name the file actually read (--params-file, QT_PARAMS_DIR or params/).
     let params_file = args.shell.params_path(shell.name());
     let result = game_manager::node::run(&mut shell, params, &params_file).await;

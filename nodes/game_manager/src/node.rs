@@ -44,26 +44,8 @@ pub async fn run(
 ) -> anyhow::Result<()> {
     let mut core = GameManager::new(params.clone())
         .with_context(|| format!("parameter file {}", params_file.display()))?;
-    let supervision = &params.supervision;
-    if supervision.supervised_autonomy && !supervision.user_model_file.is_empty() {
-        // The σ rule reads the same models as the policy; a file it cannot use is named.
-        let path = std::path::Path::new(&supervision.user_model_file);
-        let models = user_models::UserModelSet::load(path).with_context(|| {
-            format!(
-                "user_model_file (supervised autonomy's σ rule) in {}",
-                params_file.display()
-            )
-        })?;
-        tracing::info!(file = %path.display(), clusters = models.cluster_count(),
-            "supervised autonomy: proposing decisions above temperature {} or σ {}",
-            supervision.propose_above_temperature, supervision.propose_above_success_std);
-        core = core.with_user_models(models.tables());
-    } else if supervision.supervised_autonomy {
-        tracing::info!(
-            "supervised autonomy: proposing decisions above temperature {} (no user_model_file: \
-             no σ rule)",
-            supervision.propose_above_temperature
-        );
+    if let Some(tables) = sigma_rule_models(&params, params_file)? {
+        core = core.with_user_models(tables);
     }
     let mut files = SessionFiles::new(&params.files.sessions_dir);
     let out = Outboxes {
@@ -77,6 +59,8 @@ pub async fn run(
     let mut engagement = bus.subscribe(EXPECTED_ENGAGEMENT, 256)?;
     // Every node's 10 Hz heartbeat; the core watches those named in watched_nodes.
     let mut heartbeats = bus.subscribe(HEARTBEAT, 256)?;
+    // `ros2 param set` of the language and supervised autonomy's settings, between sessions.
+    let mut changes = bus.parameter_changes::<GameManagerParams>();
     let policy = bus.client(DECIDE_ACTION)?;
     let clock = bus.clock();
     // Inputs from tasks of ours: the policy's answers and the robot's steps.
@@ -159,6 +143,11 @@ pub async fn run(
             Some(e) = engagement.recv() => Input::Engagement(e),
             Some(h) = heartbeats.recv() => Input::Heartbeat(h),
             Some(d) = decided.recv() => d,
+            Some(change) = changes.recv() => {
+                let result = change_parameters(&mut core, &change, params_file);
+                change.respond(result);
+                continue;
+            }
             _ = clock.sleep_until(next_timer.unwrap_or_default()), if next_timer.is_some() => {
                 match ctx.timers.pop_first() {
                     Some((_, id)) => Input::TimerFired { id },
@@ -175,6 +164,61 @@ pub async fn run(
         let outputs = core.handle(input, Now::of(&clock));
         ctx.apply(outputs);
     }
+    Ok(())
+}
+
+/// The user models supervised autonomy's σ rule reads (`user_model_file`), when supervised
+/// autonomy is on and the file is named; a file it cannot use is named in the error.
+fn sigma_rule_models(
+    params: &GameManagerParams,
+    params_file: &std::path::Path,
+) -> anyhow::Result<Option<Vec<sequence_game::UserModelTable>>> {
+    let supervision = &params.supervision;
+    if !supervision.supervised_autonomy {
+        return Ok(None);
+    }
+    if supervision.user_model_file.is_empty() {
+        tracing::info!(
+            "supervised autonomy: proposing decisions above temperature {} (no user_model_file: \
+             no σ rule)",
+            supervision.propose_above_temperature
+        );
+        return Ok(None);
+    }
+    // The σ rule reads the same models as the policy.
+    let path = std::path::Path::new(&supervision.user_model_file);
+    let models = user_models::UserModelSet::load(path).with_context(|| {
+        format!(
+            "user_model_file (supervised autonomy's σ rule) in {}",
+            params_file.display()
+        )
+    })?;
+    tracing::info!(file = %path.display(), clusters = models.cluster_count(),
+        "supervised autonomy: proposing decisions above temperature {} or σ {}",
+        supervision.propose_above_temperature, supervision.propose_above_success_std);
+    Ok(Some(models.tables()))
+}
+
+/// A change of parameters asked for over the graph, handed to the core; a change that turns
+/// supervised autonomy on first reads the σ rule's user models, and one whose file cannot be
+/// read is refused with the reason.
+fn change_parameters(
+    core: &mut GameManager,
+    change: &node_shell::parameters::ParameterChange<GameManagerParams>,
+    params_file: &std::path::Path,
+) -> Result<(), String> {
+    let new = &change.parameters;
+    let models = if core.has_user_models() || core.session_running() {
+        None
+    } else {
+        sigma_rule_models(new, params_file).map_err(|e| format!("{e:#}"))?
+    };
+    core.change_parameters(new.clone(), &change.changed)?;
+    if let Some(tables) = models {
+        core.set_user_models(tables);
+    }
+    tracing::info!(keys = ?change.changed, language = %new.lines.language,
+        supervised_autonomy = new.supervision.supervised_autonomy, "parameters changed");
     Ok(())
 }
 

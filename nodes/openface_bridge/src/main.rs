@@ -28,15 +28,23 @@ struct Cli {
 async fn main() -> anyhow::Result<()> {
     // packaging/deb/build.sh asks each program for its manual pages.
     man_pages::write_if_asked::<Cli>();
-    let cli = Cli::parse();
-    let (mut shell, mut params): (NodeShell, OpenFaceBridgeParams) =
-        NodeShell::start(NODE, &cli.shell)?;
+    let mut cli = Cli::parse();
+    // As the parameters' overrides, so ROS 2 tools see (and `ros2 param dump` writes) what the
+    // bridge runs with. The path single-quoted (its quotes doubled): a YAML string, whatever
+    // it looks like.
     if let Some(csv) = &cli.csv {
-        params.csv_path = csv.clone();
+        let value = csv.replace('\'', "''");
+        cli.shell
+            .param_overrides
+            .push(format!("csv_path:='{value}'"));
     }
     if let Some(rate) = cli.rate {
-        params.replay_rate = rate;
+        cli.shell
+            .param_overrides
+            .push(format!("replay_rate:={rate:?}"));
     }
+    let (mut shell, params): (NodeShell, OpenFaceBridgeParams) =
+        NodeShell::start(NODE, &cli.shell)?;
     let params_file = cli.shell.params_path(shell.name());
     let outcome = match params.validate() {
         Ok(stamp) => run(&mut shell, &params, Bridge::new(&params, stamp)).await,

@@ -1,6 +1,7 @@
 //! The bridge's parameters (`params/openface_bridge.yaml`) and their checks.
 
-use serde::Deserialize;
+use node_shell::parameters::DescribedParameters;
+use serde::{Deserialize, Serialize};
 
 /// Where a frame's stamp comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -13,7 +14,8 @@ pub enum StampSource {
     Receipt,
 }
 
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+/// The OpenFace bridge node's parameters.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, DescribedParameters)]
 #[serde(deny_unknown_fields, default)]
 pub struct OpenFaceBridgeParams {
     /// The CSV OpenFace writes (`-out_dir DIR -of NAME` gives `DIR/NAME.csv`), or `-` for

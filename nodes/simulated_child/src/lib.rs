@@ -27,7 +27,9 @@ use sequence_game::{Emotion, Feedback, Level, ModelInput, Outcome, UserModelTabl
 use std::collections::{BTreeSet, VecDeque};
 
 /// How the simulated child behaves. Defaults follow the study (REFERENCE.md).
-#[derive(Debug, Clone, serde::Deserialize)]
+#[derive(
+    Debug, Clone, serde::Deserialize, serde::Serialize, node_shell::parameters::DescribedParameters,
+)]
 #[serde(deny_unknown_fields, default)]
 pub struct ChildParams {
     /// The user-model file whose cluster drives the child.
@@ -50,8 +52,9 @@ pub struct ChildParams {
     pub gaze_dwell_s: f64,
     /// Share of frames where OpenFace loses the face.
     pub face_lost_rate: f64,
-    /// OpenFace face id and camera frame.
+    /// OpenFace face id of the child's face.
     pub face_id: String,
+    /// The camera frame in every frame's header.
     pub camera_frame: String,
 }
 

@@ -23,11 +23,13 @@ struct Cli {
 async fn main() -> anyhow::Result<()> {
     // packaging/deb/build.sh asks each program for its manual pages.
     man_pages::write_if_asked::<Cli>();
-    let cli = Cli::parse();
-    let (mut shell, mut params): (NodeShell, ChildParams) = NodeShell::start(NODE, &cli.shell)?;
+    let mut cli = Cli::parse();
     if let Some(c) = cli.cluster {
-        params.cluster = c;
+        // As the parameter's override, so ROS 2 tools see (and `ros2 param dump` writes) the
+        // cluster the child runs with.
+        cli.shell.param_overrides.push(format!("cluster:={c}"));
     }
+    let (mut shell, params): (NodeShell, ChildParams) = NodeShell::start(NODE, &cli.shell)?;
     // Every way out, errors included, stops the shell first: its DDS entities go before the
     // participant, so the error is the last line printed, not RustDDS noise.
     let outcome = simulated_child::node::run(&mut shell, params).await;

@@ -6,7 +6,9 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 /// `tablet_bridge.ros__parameters`.
-#[derive(Debug, Clone, serde::Deserialize)]
+#[derive(
+    Debug, Clone, serde::Deserialize, serde::Serialize, node_shell::parameters::DescribedParameters,
+)]
 #[serde(deny_unknown_fields, default)]
 pub struct TabletBridgeParams {
     /// Address the HTTPS + WebSocket server listens on.
@@ -17,7 +19,9 @@ pub struct TabletBridgeParams {
     pub tls_key_file: String,
     /// Serve plain HTTP on an address other computers reach (never needed on loopback).
     pub allow_plain_http: bool,
-    /// The therapist page's PIN (env `QT_TABLET_PIN` overrides it).
+    /// The therapist page's PIN (env `QT_TABLET_PIN` overrides it). Hidden from the ROS 2
+    /// graph: anyone on the domain could read it through `ros2 param get`.
+    #[parameter(hidden)]
     pub pin: String,
     /// Page language: `en` or `de`.
     pub language: String,

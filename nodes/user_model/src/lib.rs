@@ -5,7 +5,9 @@
 pub mod node;
 
 /// Parameters of the user-model node (`params/user_model.yaml`).
-#[derive(Debug, Clone, serde::Deserialize)]
+#[derive(
+    Debug, Clone, serde::Deserialize, serde::Serialize, node_shell::parameters::DescribedParameters,
+)]
 #[serde(deny_unknown_fields, default)]
 pub struct UserModelParams {
     /// The fitted model file the node serves.

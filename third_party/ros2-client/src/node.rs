@@ -841,6 +841,13 @@ impl Node {
     self.parameters.names()
   }
 
+  /// The node's `/parameter_events` writer (the one announced as the node's), for a node
+  /// that serves its parameters itself (`NodeOptions::start_parameter_services(false)`)
+  /// and announces its own changes.
+  pub fn parameter_events_publisher(&self) -> Arc<Publisher<raw::ParameterEvent>> {
+    Arc::clone(&self.parameter_events_writer)
+  }
+
   fn publish_parameter_changes(&self, changes: ParameterChanges) {
     publish_parameter_changes(
       &self.parameter_events_writer,

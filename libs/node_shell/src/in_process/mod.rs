@@ -439,6 +439,13 @@ impl Bus for InProcessNode {
         }
     }
 
+    fn parameter_changes<P: crate::parameters::NodeParameters>(
+        &mut self,
+    ) -> mpsc::Receiver<crate::parameters::ParameterChange<P>> {
+        // No ROS graph, so no parameter services: a channel that never yields.
+        mpsc::channel(1).1
+    }
+
     fn shutdown_signal(&self) -> impl Future<Output = ()> + Send + 'static {
         crate::shutdown::when_stopped(&self.shutdown)
     }

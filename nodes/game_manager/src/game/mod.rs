@@ -10,6 +10,7 @@
 
 mod commands;
 mod decide;
+pub(crate) mod parameters;
 mod play;
 mod propose;
 mod recover;

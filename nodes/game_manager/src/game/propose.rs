@@ -91,6 +91,23 @@ impl ProposalDesk {
         }
     }
 
+    /// New supervision settings (between sessions: no proposal is open); the user models
+    /// stay.
+    pub(super) fn set_params(&mut self, params: &SupervisionParams, time_scale: f64) {
+        let desk = ProposalDesk::new(params, time_scale);
+        self.enabled = desk.enabled;
+        self.rule = desk.rule;
+        self.countdown_ns = desk.countdown_ns;
+    }
+
+    pub(super) fn has_user_models(&self) -> bool {
+        !self.user_models.is_empty()
+    }
+
+    pub(super) fn set_user_models(&mut self, tables: Vec<UserModelTable>) {
+        self.user_models = tables;
+    }
+
     /// A new (or taken-over) session: no proposal open, none counted (a taken-over session's
     /// proposals live in the bag, not in its files).
     pub(super) fn new_session(&mut self) {

@@ -10,7 +10,8 @@ mod validate;
 
 pub use validate::ParamError;
 
-use serde::Deserialize;
+use node_shell::parameters::{Declared, DescribedParameters};
+use serde::{Deserialize, Serialize};
 
 /// Declares the parameter groups once: each group a struct with its keys (the file's keys),
 /// types, doc comments and defaults; `GameManagerParams` holding one of each; and the file's
@@ -23,7 +24,7 @@ macro_rules! parameter_groups {
         $(
             $(#[$group_meta:meta])*
             $group:ident: $Group:ident {
-                $( $(#[$meta:meta])* $key:ident: $ty:ty = $default:expr, )*
+                $( $(#[$meta:meta])* $([$writable:ident])? $key:ident: $ty:ty = $default:expr, )*
             }
         )*
     ) => {
@@ -42,17 +43,19 @@ macro_rules! parameter_groups {
         )*
 
         /// Parameters of the game manager node, by concern; the file's keys are flat.
-        #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-        #[serde(from = "FlatParams")]
+        #[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
+        #[serde(from = "FlatParams", into = "FlatParams")]
         pub struct GameManagerParams {
             $( $(#[$group_meta])* pub $group: $Group, )*
         }
 
-        /// The parameter file's form: every key at the top level.
-        #[derive(Deserialize)]
+        /// The parameter file's form: every key at the top level, described for the ROS 2
+        /// parameter services (its doc comments; `[writable]` keys change while the node
+        /// runs: `GameManager::change_parameters`).
+        #[derive(Deserialize, Serialize, DescribedParameters)]
         #[serde(deny_unknown_fields, default)]
         struct FlatParams {
-            $( $( $key: $ty, )* )*
+            $( $( $(#[$meta])* $(#[parameter($writable)])? $key: $ty, )* )*
         }
 
         impl Default for FlatParams {
@@ -67,7 +70,19 @@ macro_rules! parameter_groups {
                 GameManagerParams { $( $group: $Group { $( $key: f.$key, )* }, )* }
             }
         }
+
+        impl From<GameManagerParams> for FlatParams {
+            fn from(p: GameManagerParams) -> Self {
+                FlatParams { $( $( $key: p.$group.$key, )* )* }
+            }
+        }
     };
+}
+
+impl DescribedParameters for GameManagerParams {
+    fn declared() -> Vec<Declared> {
+        FlatParams::declared()
+    }
 }
 
 fn strings(v: &[&str]) -> Vec<String> {
@@ -122,7 +137,7 @@ parameter_groups! {
     /// What the robot says, and the faces and gestures that go with it.
     lines: LineParams {
         /// Language of the robot's lines: "en" or "de".
-        language: String = "en".into(),
+        [writable] language: String = "en".into(),
         /// The introduction, in English.
         intro_en: String = "Hello! Let's play a memory game. I will say some emotions. \
                             Listen carefully and then tap them on the tablet in the same order."
@@ -242,10 +257,10 @@ parameter_groups! {
         /// Supervised autonomy: a decision the policy is unsure of is proposed to the
         /// therapist (ActionProposal) and played when accepted, replaced, or when its
         /// countdown runs out.
-        supervised_autonomy: bool = false,
+        [writable] supervised_autonomy: bool = false,
         /// A decision whose state's softmax temperature is above this is proposed (the
         /// temperature falls with the state's visits: 300 unvisited, 0.5 after 60 visits).
-        propose_above_temperature: f64 = 100.0,
+        [writable] propose_above_temperature: f64 = 100.0,
         /// A decision whose user-model σ of P(success) for the sequence it sets up is above
         /// this is proposed (needs `user_model_file`). What σ means is the file's: with the
         /// paper's fit (noise 1e-10, the shipped models) it is about 0 at every (L, F, PS) the
@@ -253,9 +268,9 @@ parameter_groups! {
         /// seen in the study" for any limit between; with a model fitted with
         /// `user_model fit --noise fitted` it is 0.06-0.22 on the study and says how well the
         /// data pin P(success) down.
-        propose_above_success_std: f64 = 0.3,
+        [writable] propose_above_success_std: f64 = 0.3,
         /// Seconds (before time_scale) the therapist has to answer a proposal.
-        proposal_countdown_s: f64 = 5.0,
+        [writable] proposal_countdown_s: f64 = 5.0,
         /// The user models the σ rule reads ("" turns it off): the behaviour policy's file,
         /// or the same study fitted with `--noise fitted` (the same clusters) for a σ that
         /// means uncertainty.

@@ -5,6 +5,7 @@ mod clock;
 mod commands;
 mod harness;
 mod heartbeats;
+mod parameters;
 mod proposals;
 mod recovery;
 mod robot;
