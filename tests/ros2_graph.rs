@@ -4,13 +4,17 @@
 //! `ros2 topic info -v`, `ros2 topic echo` and rqt do (tests/ros2/peer.py): every node listed,
 //! every endpoint attributed to its node, every type hash equal to rosidl's, every line the
 //! robot says heard, /rosout lines from every node; it publishes a topic of its own, which the
-//! recorder's `--all` must record. Then `bag play --clock` of that bag must publish /clock.
+//! recorder's `--all` must record; and it works every node's parameters as `ros2 param` does
+//! (list, get, describe, a set taken and seen on /parameter_events, sets refused with
+//! rclcpp's reasons, and `ros2 param dump`, which this test loads back through each node's
+//! parameter reader). Then `bag play --clock` of that bag must publish /clock.
 //!
 //! The wheels' venv: `QT_ROS2_VENV` (tests/run.sh installs it while the workspace builds and
 //! writes `<venv>/.installed` when done), else `target/ros2-venv`. Without one the test skips,
 //! and fails under tests/run.sh (QT_REQUIRE_ALL_TESTS), as the browser test does.
 
 use bag_file::BagReader;
+use node_shell::parameters::NodeParameters;
 use qt_therapy_msgs::std_msgs::StringMsg;
 use qt_therapy_msgs::topics::ROBOT_SPEECH;
 use serde_json::Value;
@@ -58,6 +62,36 @@ fn ros2_venv() -> Option<PathBuf> {
     None
 }
 
+/// `ros2 param dump`'s file of `node` (the peer's), read as the node reads its parameter file:
+/// every key it holds comes back with its value, and it holds every parameter the node shows
+/// on the graph.
+fn dump_loads_back<P: NodeParameters>(dump_dir: &Path, node: &str) -> Result<P, String> {
+    let path = dump_dir.join(format!("{node}.yaml"));
+    let params: P = node_shell::params::load_parameters(&path, node).map_err(|e| e.to_string())?;
+    let mut dumped =
+        node_shell::params::read_parameter_map(&path, node).map_err(|e| e.to_string())?;
+    dumped.remove(node_shell::parameters::USE_SIM_TIME);
+    let Ok(Value::Object(read)) = serde_json::to_value(&params) else {
+        return Err(format!("{node}'s parameters do not serialise to a map"));
+    };
+    for (key, value) in &dumped {
+        if read.get(key) != Some(value) {
+            return Err(format!(
+                "{node}: {key} is {value} in the dump, {:?} as read back",
+                read.get(key)
+            ));
+        }
+    }
+    let shown = P::declared().iter().filter(|d| !d.hidden).count();
+    if dumped.len() != shown {
+        return Err(format!(
+            "{node}: the dump holds {} parameters, the node shows {shown}",
+            dumped.len()
+        ));
+    }
+    Ok(params)
+}
+
 fn report(path: &Path) -> Value {
     std::fs::read_to_string(path)
         .ok()
@@ -91,12 +125,13 @@ fn a_real_ros2_peer_sees_the_whole_session() {
     let (o, v) = (out.display(), venv.display());
     let python = format!("( . tests/ros2/env.sh {v}; exec {v}/bin/python tests/ros2/peer.py");
     let script = format!(
-        "{python} session --report {o}/session.json --expect-nodes {nodes} ) > {o}/peer.log 2>&1 &
+        "{python} session --report {o}/session.json --expect-nodes {nodes} --dump-dir {o}/dump ) \
+  > {o}/peer.log 2>&1 &
 peer=$!
 # The peer is up before the session: it must hear the robot's first line too.
 sleep 4
 {bin}/launch launch_scripts/simulated_session.launch.yaml --log-dir {o}/logs bin:={bin} \
-  out:={o} time_scale:=0.05 cluster:=0 game_args:='--param robot_speech_node:=ros2_peer' \
+  out:={o} time_scale:=0.05 cluster:=0 seed:=7 game_args:='--param robot_speech_node:=ros2_peer' \
   > {o}/stdout.log 2> {o}/stderr.log
 echo launch_exit=$?
 kill -INT $peer; wait $peer
@@ -192,6 +227,69 @@ wait $clock_peer
             "{topic}'s definition in the bag is {schema:?}"
         );
     }
+
+    // `ros2 param dump` of every node loads back as its parameter file (the peer dumped the
+    // classifier again after its min_confidence was set to 0.7).
+    let dump = out.join("dump");
+    let loaded: Vec<(&str, Result<(), String>)> = vec![
+        (
+            "bag_recorder",
+            dump_loads_back::<bag::params::RecorderParams>(&dump, "bag_recorder").map(drop),
+        ),
+        (
+            "behaviour_policy",
+            dump_loads_back::<behaviour_policy::BehaviourPolicyParams>(&dump, "behaviour_policy")
+                .map(drop),
+        ),
+        (
+            "engagement_classifier",
+            dump_loads_back::<engagement_classifier::EngagementClassifierParams>(
+                &dump,
+                "engagement_classifier",
+            )
+            .and_then(|p| {
+                p.validate().map_err(|e| e.to_string())?;
+                (p.min_confidence == 0.7).then_some(()).ok_or(format!(
+                    "min_confidence {} in the dump, not 0.7",
+                    p.min_confidence
+                ))
+            }),
+        ),
+        (
+            "game_manager",
+            dump_loads_back::<game_manager::GameManagerParams>(&dump, "game_manager")
+                .and_then(|p| p.validate().map_err(|e| e.to_string())),
+        ),
+        (
+            "simulated_child",
+            dump_loads_back::<simulated_child::ChildParams>(&dump, "simulated_child").map(drop),
+        ),
+        (
+            "tablet_bridge",
+            dump_loads_back::<tablet_bridge::TabletBridgeParams>(&dump, "tablet_bridge").map(drop),
+        ),
+        (
+            "therapist_console",
+            dump_loads_back::<node_shell::NoParameters>(&dump, "therapist_console").map(drop),
+        ),
+        (
+            "user_model",
+            dump_loads_back::<user_model::UserModelParams>(&dump, "user_model").map(drop),
+        ),
+    ];
+    let failed: Vec<String> = loaded
+        .into_iter()
+        .filter_map(|(node, r)| r.err().map(|e| format!("{node}: {e}")))
+        .collect();
+    assert!(failed.is_empty(), "{failed:#?}\n{context}");
+    // The change the peer made reached the classifier's core.
+    let classifier_log = read("logs/engagement_classifier.log");
+    assert!(
+        classifier_log
+            .lines()
+            .any(|l| l.contains("parameters changed") && l.contains("min_confidence=0.7")),
+        "the classifier did not log the change\n{context}"
+    );
 
     // bag play --clock.
     assert!(stdout.contains("play_exit=0"), "{context}");

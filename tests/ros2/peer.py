@@ -4,13 +4,17 @@ and looks at it as `ros2 node list`, `ros2 topic info -v`, `ros2 topic echo` and
 tests/ros2_graph.rs starts it in the session's loopback namespace, with the environment of
 tests/ros2/env.sh. Two phases:
 
-  peer.py session --report R.json --expect-nodes a,b,... [--graph-after S]
+  peer.py session --report R.json --expect-nodes a,b,... --dump-dir D [--graph-after S]
       up before the suite: publishes two topics of its own for the recorder
       (/ros2_peer/chatter, std_msgs/String; /ros2_peer/count, std_msgs/Int32, a type the
       suite does not know), counts the robot's utterances, reads /rosout as rqt_console does; once every
       expected node is listed (or --graph-after seconds have passed) it checks the graph: each
       node listed, every endpoint of the suite's topics and services attributed to a node, each
-      endpoint's type hash equal to rosidl's. It writes its report at SIGINT/SIGTERM.
+      endpoint's type hash equal to rosidl's. Then the parameters, as `ros2 param` does them
+      (rclpy's AsyncParameterClient): each node's listed, got, described; one set taken
+      (seen on /parameter_events), others refused with their reasons; each node's dumped into
+      D/<node>.yaml as `ros2 param dump` writes it, for the Rust test to load back. It writes
+      its report at SIGINT/SIGTERM.
   peer.py play --report R.json --seconds S
       counts /clock (rosgraph_msgs/Clock) while `bag play --clock` plays.
 
@@ -25,8 +29,12 @@ import time
 from pathlib import Path
 
 import rclpy
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import Log
+from rclpy.qos import qos_profile_parameter_events
+from rcl_interfaces.msg import Log, ParameterEvent, ParameterType
+import yaml
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Int32, String
 
@@ -134,6 +142,137 @@ def check_graph(node, report, expected_nodes, reference):
                  f'{checked} endpoints of the suite checked; wrong: {wrong[:8]}')
 
 
+def call(node, future, timeout=10.0):
+    """The answer of a service call, or None after `timeout` s (spinning meanwhile)."""
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+    return future.result() if future.done() else None
+
+
+def dump(node, client, name, dump_dir):
+    """`ros2 param dump NAME` (ros2cli's jazzy ros2param/verb/dump.py): list, get every
+    name, nest the dotted ones, yaml.dump with default_flow_style=False."""
+    listed = call(node, client.list_parameters())
+    if listed is None:
+        return None
+    names = sorted(listed.result.names)
+    got = call(node, client.get_parameters(names))
+    if got is None:
+        return None
+    params = {}
+    for key, value in zip(names, got.values):
+        d = params
+        parts = key.split('.')
+        for part in parts[:-1]:
+            d = d.setdefault(part, {})
+        d[parts[-1]] = parameter_value_to_python(value)
+    text = yaml.dump({f'/{name}': {'ros__parameters': params}}, default_flow_style=False)
+    Path(dump_dir, f'{name}.yaml').write_text(text)
+    return names
+
+
+def check_parameters(node, report, expected_nodes, events, dump_dir):
+    """What `ros2 param list/get/describe/set/dump` do, against every node of the suite."""
+    Path(dump_dir).mkdir(parents=True, exist_ok=True)
+    clients = {name: AsyncParameterClient(node, f'/{name}') for name in expected_nodes}
+    listed = {}
+    for name, client in clients.items():
+        if client.wait_for_services(timeout_sec=10.0):
+            listed[name] = dump(node, client, name, dump_dir)
+        else:
+            listed[name] = None
+    report.facts['parameters'] = listed
+    unanswered = sorted(n for n, names in listed.items() if names is None)
+    report.check('every node answers list_parameters and get_parameters', not unanswered,
+                 f'unanswered: {unanswered}')
+    # Every node lists its own parameters beside use_sim_time (the console has none).
+    bare = sorted(n for n, names in listed.items()
+                  if names is not None and n != 'therapist_console' and
+                  set(names) <= {'use_sim_time'})
+    report.check("every node lists its own parameters", not bare,
+                 f'only use_sim_time: {bare}; game_manager: {listed.get("game_manager")}')
+    gm = clients['game_manager']
+    ec = clients['engagement_classifier']
+
+    got = call(node, gm.get_parameters(['language', 'seed', 'watched_nodes']))
+    values = [parameter_value_to_python(v) for v in got.values] if got else None
+    # seed: tests/ros2_graph.rs launches with seed:=7 (`--param seed:=7`, over the
+    # parameter file's 42).
+    report.check('get_parameters gives the values the node runs with', values is not None and
+                 values[0] == 'en' and values[1] == 7 and 'tablet_bridge' in values[2],
+                 f'game_manager language, seed, watched_nodes: {values}')
+    types = call(node, gm.get_parameter_types(['language', 'watched_nodes', 'time_scale']))
+    types = list(types.types) if types else None
+    report.check('get_parameter_types gives the types', types == [
+        ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_STRING_ARRAY,
+        ParameterType.PARAMETER_DOUBLE], f'{types}')
+
+    described = call(node, gm.describe_parameters(['language', 'seed']))
+    d = described.descriptors if described else []
+    report.facts['described'] = [
+        {'name': x.name, 'type': x.type, 'description': x.description,
+         'read_only': x.read_only, 'additional_constraints': x.additional_constraints}
+        for x in d]
+    report.check('describe_parameters gives each description and whether it is read-only',
+                 len(d) == 2 and d[0].description.startswith('Language of the robot') and
+                 not d[0].read_only and d[1].read_only and d[1].description != '',
+                 f'{report.facts["described"]}')
+    unknown = call(node, gm.describe_parameters(['no_such_parameter']))
+    report.check('describe of a name not declared is empty (as rclcpp)',
+                 unknown is not None and len(unknown.descriptors) == 0,
+                 f'{unknown.descriptors if unknown else "no answer"}')
+
+    # One change taken: the classifier's min_confidence, applied from its next frame.
+    set_ok = call(node, ec.set_parameters([Parameter('min_confidence', value=0.7)]))
+    ok = set_ok.results[0] if set_ok else None
+    report.check('set_parameters of a writable parameter is taken',
+                 ok is not None and ok.successful, f'{ok}')
+    end = time.monotonic() + 5.0
+    seen = []
+    while time.monotonic() < end and not seen:
+        rclpy.spin_once(node, timeout_sec=0.1)
+        seen = [e for e in events if e.node == '/engagement_classifier' and any(
+            p.name == 'min_confidence' and p.value.double_value == 0.7
+            for p in e.changed_parameters)]
+    report.check('the change is on /parameter_events', bool(seen),
+                 f'{len(events)} events: {[(e.node, [p.name for p in e.changed_parameters]) for e in events]}')
+    got = call(node, ec.get_parameters(['min_confidence']))
+    value = parameter_value_to_python(got.values[0]) if got and got.values else None
+    report.check('get_parameters gives the new value', value == 0.7, f'{value}')
+
+    # Refused: read-only (the node shell, in rclcpp's words), not declared, of the wrong type,
+    # all or nothing (atomically), and a value the game manager's core refuses.
+    refusals = {}
+    for client, who, params in [
+            (gm, 'read-only', [Parameter('seed', value=1)]),
+            (gm, 'not declared', [Parameter('no_such_parameter', value=1)]),
+            (ec, 'wrong type', [Parameter('min_confidence', value='high')]),
+            (gm, 'refused by the core', [Parameter('proposal_countdown_s', value=-1.0)])]:
+        r = call(node, client.set_parameters(params))
+        refusals[who] = (r.results[0].successful, r.results[0].reason) if r else None
+    atomic = call(node, ec.set_parameters_atomically(
+        [Parameter('min_confidence', value=0.6), Parameter('smoothing_alpha', value=0.5)]))
+    refusals['atomically, one read-only'] = (
+        (atomic.result.successful, atomic.result.reason) if atomic else None)
+    report.facts['refusals'] = refusals
+    want = {
+        'read-only': "parameter 'seed' cannot be set because it is read-only",
+        'not declared': "parameter 'no_such_parameter' cannot be set because it was not declared",
+        'wrong type': 'Wrong parameter type, parameter {min_confidence} is of type {double}, '
+                      'setting it to {string} is not allowed.',
+        'atomically, one read-only':
+            "parameter 'smoothing_alpha' cannot be set because it is read-only",
+    }
+    wrong = {k: v for k, v in refusals.items()
+             if v is None or v[0] or (k in want and v[1] != want[k]) or
+             (k == 'refused by the core' and 'proposal_countdown_s' not in v[1])}
+    report.check('refused sets say why, as rclcpp does', not wrong, f'{refusals}')
+    got = call(node, ec.get_parameters(['min_confidence']))
+    value = parameter_value_to_python(got.values[0]) if got and got.values else None
+    report.check('a refused atomic set changes nothing', value == 0.7, f'{value}')
+    # The dump after the change holds it (the Rust test loads every dump back).
+    dump(node, ec, 'engagement_classifier', dump_dir)
+
+
 def reference_hashes():
     """rosidl's hashes of the suite's interfaces and of the ROS 2 types its builtin
     endpoints carry (from the wheels' share/ folders)."""
@@ -167,6 +306,9 @@ def session(args):
     node.create_subscription(
         Log, '/rosout',
         lambda m: rosout.setdefault(m.name, set()).add(m.level), rosout_qos)
+    events = []
+    node.create_subscription(ParameterEvent, '/parameter_events', events.append,
+                             qos_profile_parameter_events)
     chatter = node.create_publisher(String, FOREIGN, reliable)
     counter = node.create_publisher(Int32, FOREIGN_UNKNOWN_TYPE, reliable)
     sent = [0]
@@ -199,6 +341,7 @@ def session(args):
             while time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.2)
             check_graph(node, report, expected_nodes, reference)
+            check_parameters(node, report, expected_nodes, events, args.dump_dir)
             graph_checked = True
             report.write()
     if not graph_checked:
@@ -242,6 +385,7 @@ def main():
     s = sub.add_parser('session')
     s.add_argument('--report', required=True)
     s.add_argument('--expect-nodes', required=True)
+    s.add_argument('--dump-dir', required=True)
     s.add_argument('--settle', type=float, default=3.0)
     s.add_argument('--graph-after', type=float, default=16.0)
     p = sub.add_parser('play')
