@@ -157,6 +157,12 @@ wait $clock_peer
     );
     assert!(stdout.contains("launch_exit=0"), "{context}");
 
+    // Every endpoint of the suite offers or asks what rclpy's match: no ROS 2 tool warns.
+    assert!(
+        !read("peer.log").contains("incompatible QoS"),
+        "a QoS incompatibility with the real peer:\n{context}"
+    );
+
     let session = report(&out.join("session.json"));
     let failed = failed_checks(&session);
     assert!(failed.is_empty(), "{failed:#?}\n{context}");

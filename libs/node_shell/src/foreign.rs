@@ -22,7 +22,7 @@ pub struct ForeignTopic {
     pub name: String,
     /// `pkg/msg/Type`.
     pub type_name: String,
-    /// What its (first) publisher offers.
+    /// What a reader asks to match every publisher found (`adapt_to_offer`).
     pub qos: QosPolicies,
     /// The publisher's node (`/ns/name`), if its participant announced it.
     pub publisher_node: Option<String>,
@@ -46,6 +46,24 @@ fn announced_hash(user_data: &[u8]) -> Option<String> {
         .map(str::to_string)
 }
 
+/// What a reader may ask and still match a further publisher offering `offer`, as rosbag2's
+/// recorder adapts its request to every offer (`rosbag2_transport/src/rosbag2_transport/qos.cpp`,
+/// `adapt_request_to_offers`): reliable and transient-local only while every publisher offers
+/// them. A reader asking transient-local of a volatile publisher (rclpy's `/parameter_events`
+/// beside ros2-client's transient-local one) would match none of its samples, and every ROS 2
+/// tool would warn of incompatible QoS.
+fn adapt_to_offer(request: &QosPolicies, offer: &QosPolicies) -> QosPolicies {
+    use rustdds::policy::{Durability, Reliability};
+    let mut change = rustdds::QosPolicyBuilder::new();
+    if !matches!(offer.reliability(), Some(Reliability::Reliable { .. })) {
+        change = change.reliability(Reliability::BestEffort);
+    }
+    if matches!(offer.durability(), None | Some(Durability::Volatile)) {
+        change = change.durability(Durability::Volatile);
+    }
+    request.modify_by(&change.build())
+}
+
 impl NodeShell {
     /// The ROS topics (`rt/...`) that discovery reports a publisher of, other than those in
     /// `known` (by `/name`), one per topic.
@@ -56,7 +74,11 @@ impl NodeShell {
             let Some(name) = data.topic_name().strip_prefix("rt") else {
                 continue;
             };
-            if known(name) || topics.contains_key(name) {
+            if known(name) {
+                continue;
+            }
+            if let Some(topic) = topics.get_mut(name) {
+                topic.qos = adapt_to_offer(&topic.qos, &data.qos());
                 continue;
             }
             let Some(type_name) = ros_type_name(&data.type_name) else {

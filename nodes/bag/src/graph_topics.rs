@@ -35,6 +35,8 @@ struct Tapped {
     reader: JoinHandle<()>,
     /// Since when discovery reports no publisher of it.
     unpublished_since: Option<Instant>,
+    /// What its reader asked.
+    qos: rustdds::QosPolicies,
 }
 
 /// The graph's topics beside the suite's, found and tapped as they appear, and released once
@@ -158,12 +160,29 @@ impl GraphTopics {
 
 impl Discover<NodeShell> for GraphTopics {
     async fn discover(&mut self, shell: &mut NodeShell) -> Vec<ForeignTopic> {
-        let published: HashSet<String> = shell
-            .foreign_topics(&|name| self.suite.contains(name))
-            .into_iter()
-            .map(|t| t.name)
-            .collect();
+        let offered = shell.foreign_topics(&|name| self.suite.contains(name));
+        let published: HashSet<String> = offered.iter().map(|t| t.name.clone()).collect();
         self.release_unpublished(&published);
+        // A publisher found since a topic was tapped may offer less than the reader asked
+        // (volatile where the first offered transient-local): the reader is made again with
+        // what matches every publisher, the new one before the old goes, so nothing is lost.
+        for topic in &offered {
+            let Some(tap) = self.tapped.get_mut(&topic.name) else {
+                continue;
+            };
+            if qos_class(&topic.qos) == qos_class(&tap.qos) {
+                continue;
+            }
+            match shell.tap_foreign(topic, self.raw.clone()) {
+                Ok(reader) => {
+                    let old = std::mem::replace(&mut tap.reader, reader);
+                    old.abort();
+                    tap.qos = topic.qos.clone();
+                    tracing::debug!(topic = %topic.name, "a publisher offers less: reader made again to match it");
+                }
+                Err(e) => tracing::warn!(topic = %topic.name, "cannot tap again: {e:#}"),
+            }
+        }
         let found = shell.foreign_topics(&|name| self.recorded(name));
         let mut out = Vec::new();
         for topic in found {
@@ -175,6 +194,7 @@ impl Discover<NodeShell> for GraphTopics {
                         Tapped {
                             reader,
                             unpublished_since: None,
+                            qos: topic.qos.clone(),
                         },
                     );
                 }

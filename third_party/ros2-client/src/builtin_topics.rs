@@ -34,10 +34,13 @@ pub mod parameter_events {
   use super::*;
 
   lazy_static! {
+    // As rclcpp's rmw_qos_profile_parameter_events: volatile, keep last 1000. Transient-local
+    // here made every rclpy/rclcpp node's volatile writer meet readers asking more than it
+    // offers (a DURABILITY incompatibility warned by every ROS 2 tool).
     pub static ref QOS: QosPolicies = QosPolicyBuilder::new()
-      .durability(Durability::TransientLocal)
+      .durability(Durability::Volatile)
       .reliable(Duration::ZERO)
-      .history(History::KeepLast { depth: 1 })
+      .history(History::KeepLast { depth: 1000 })
       .build();
   }
 
