@@ -5,6 +5,7 @@
 
 pub mod codes;
 pub mod definition;
+pub mod disk_status;
 pub mod hri_msgs;
 pub mod messages;
 pub mod phases;

@@ -44,6 +44,7 @@ const I18N = {
     proposal_after: "answered after {s} s", proposal_accepted: "Accepted: {what}",
     proposal_replaced: "Replaced by {what}", proposal_timed_out: "Ran out: {what} is carried out",
     proposal_withdrawn: "Withdrawn: the session ended",
+    disk_low: "The robot's disk is almost full:",
   },
   de: {
     happy: "fröhlich", disgusted: "angeekelt", sad: "traurig", angry: "wütend",
@@ -88,6 +89,7 @@ const I18N = {
     proposal_after: "beantwortet nach {s} s", proposal_accepted: "Angenommen: {what}",
     proposal_replaced: "Ersetzt durch {what}", proposal_timed_out: "Abgelaufen: {what} wird ausgeführt",
     proposal_withdrawn: "Zurückgezogen: die Sitzung ist beendet",
+    disk_low: "Der Speicher des Roboters ist fast voll:",
   },
 };
 

@@ -70,6 +70,9 @@ function showGame(g) {
     ? g.user_id + " (" + (g.cluster < 0 ? t("default_cluster") : "cluster " + g.cluster) + ")"
     : "–";
   $("g-status").textContent = g.status || "–";
+  // The disk of the session files and the bag is low or full (the game manager says how).
+  $("disk-warning").classList.toggle("hidden", !g.disk_warning);
+  $("disk-detail").textContent = g.disk_warning || "";
   updateButtons();
   proposalFollowsGame(g);
 }

@@ -231,6 +231,9 @@ pub struct GameView {
     pub last_score: i8,
     pub policy_fallback: bool,
     pub status: String,
+    /// The disk warning that `status` starts with (`GameState::disk_warning`), empty when the
+    /// disk is fine: the therapist page shows it in its own element.
+    pub disk_warning: String,
     /// A sequence is under way (the page enables pause, stop and override on it).
     pub running: bool,
     /// Sequences this session plays.
@@ -251,6 +254,9 @@ impl GameView {
             last_score: g.last_score,
             policy_fallback: g.policy_fallback,
             status: g.status.clone(),
+            disk_warning: GameState::disk_warning(&g.status)
+                .unwrap_or_default()
+                .to_string(),
             running: GameState::is_running(g.phase),
             sequences_planned: g.sequences_planned,
         }
@@ -262,6 +268,7 @@ impl GameView {
             user_id: String::new(),
             cluster: -1,
             status: String::new(),
+            disk_warning: String::new(),
             ..GameView::of(g)
         }
     }
@@ -720,6 +727,27 @@ mod tests {
         assert_eq!(v["phase"], "waiting_for_answer");
         assert_eq!(v["user_id"], "");
         assert_eq!(GameState::phase_name(200), "unknown");
+    }
+
+    #[test]
+    fn the_disk_warning_goes_to_the_therapist_page_only() {
+        let g = GameState {
+            status: "disk: 4.0 MB free in /s, below 500 MB: delete old bags or reports; \
+                     node lost: bag_recorder; paused"
+                .into(),
+            ..Default::default()
+        };
+        let therapist = GameView::of(&g);
+        assert_eq!(
+            therapist.disk_warning,
+            "4.0 MB free in /s, below 500 MB: delete old bags or reports"
+        );
+        assert_eq!(GameView::for_child(&g).disk_warning, "");
+        let fine = GameState {
+            status: "waiting".into(),
+            ..Default::default()
+        };
+        assert_eq!(GameView::of(&fine).disk_warning, "");
     }
 
     /// The result row the therapist page reads, byte for byte: which of the message's fields
