@@ -20,7 +20,7 @@ use rustls::client::danger::ServerCertVerifier as _;
 use rustls::pki_types::{CertificateDer, ServerName, UnixTime};
 use std::io::Write as _;
 use std::net::IpAddr;
-use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
+use std::os::unix::fs::MetadataExt as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
@@ -470,35 +470,27 @@ fn server_params(names: &[Name], now: SystemTime) -> Result<CertificateParams, C
     Ok(p)
 }
 
-/// Writes `bytes` to `path` whole (a new file renamed over the old one), created with `mode`
-/// (never readable by others on the way), owned by `owner` when given.
+/// Writes `bytes` to `path` whole and durably (`atomic_file`: a new file synced and renamed
+/// over the old one), created with `mode` (never readable by others on the way), owned by
+/// `owner` when given.
 pub fn write_file(
     path: &Path,
     bytes: &[u8],
     mode: u32,
     owner: Option<(u32, u32)>,
 ) -> Result<(), CertError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.new"));
-    let _ = std::fs::remove_file(&tmp);
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(mode)
-        .open(&tmp)
-        .map_err(|e| file_error(&tmp, e))?;
+    let mut new = atomic_file::NewFile::with_mode(path, mode).map_err(|e| file_error(path, e))?;
+    let tmp = new.path().to_path_buf();
     // The mode as asked, whatever the umask (the service user must read the certificates).
-    f.set_permissions(std::os::unix::fs::PermissionsExt::from_mode(mode))
+    new.file()
+        .set_permissions(std::os::unix::fs::PermissionsExt::from_mode(mode))
         .map_err(|e| file_error(&tmp, e))?;
-    f.write_all(bytes).map_err(|e| file_error(&tmp, e))?;
-    f.sync_all().map_err(|e| file_error(&tmp, e))?;
+    new.file()
+        .write_all(bytes)
+        .map_err(|e| file_error(&tmp, e))?;
     if let Some((uid, gid)) = owner {
-        std::os::unix::fs::chown(&tmp, Some(uid), Some(gid))
+        std::os::unix::fs::fchown(new.file(), Some(uid), Some(gid))
             .map_err(|e| file_error(&tmp, format!("giving it to uid {uid}: {e}")))?;
     }
-    std::fs::rename(&tmp, path).map_err(|e| file_error(path, e))?;
-    Ok(())
+    new.commit().map_err(|e| file_error(path, e))
 }

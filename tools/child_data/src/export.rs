@@ -179,27 +179,21 @@ pub fn export(inv: &Inventory, output: &Path) -> Result<Exported, ChildDataError
         }
     }
     let manifest = manifest(inv, &entries, &left_out);
-    let mut tmp = tempfile::Builder::new()
-        .prefix(STAGING_PREFIX)
-        .suffix(".tar.gz")
-        .tempfile_in(&dir)
+    // Written beside the output and renamed into place only once complete and synced
+    // (atomic_file), never over an existing file; 0600 on the way.
+    let mut tmp = atomic_file::NewFile::with_prefix(output, STAGING_PREFIX, 0o600)
         .map_err(ChildDataError::io(&dir))?;
-    write_archive(tmp.as_file_mut(), &manifest, inv, &entries).map_err(|e| {
-        ChildDataError::Archive {
-            path: output.to_path_buf(),
-            reason: e.to_string(),
-        }
+    write_archive(tmp.file(), &manifest, inv, &entries).map_err(|e| ChildDataError::Archive {
+        path: output.to_path_buf(),
+        reason: e.to_string(),
     })?;
-    tmp.as_file()
-        .sync_all()
-        .map_err(ChildDataError::io(tmp.path()))?;
-    tmp.persist_noclobber(output).map_err(|e| {
-        if e.error.kind() == std::io::ErrorKind::AlreadyExists {
+    tmp.commit_new().map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
             ChildDataError::OutputExists {
                 path: output.to_path_buf(),
             }
         } else {
-            ChildDataError::io(output)(e.error)
+            ChildDataError::io(output)(e)
         }
     })?;
     Ok(Exported {

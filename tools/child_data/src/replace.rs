@@ -1,8 +1,8 @@
-//! Changing the suite's files in place of the service: a file is replaced whole (a new file
-//! beside it, synced, renamed over it, the directory synced), so a reader sees the old or the
-//! new one and a power cut leaves one of them; the new file gets the old one's owner, group
-//! and mode, so the service (`qt-therapy`, files 0640) reads and writes it as before and nobody
-//! else gains access. Deletions sync the directory too.
+//! Changing the suite's files in place of the service: a file is replaced whole through
+//! `atomic_file` (a new file beside it, synced, renamed over it, the directory synced), so a
+//! reader sees the old or the new one and a power cut leaves one of them; the new file gets the
+//! old one's owner, group and mode, so the service (`qt-therapy`, files 0640) reads and writes
+//! it as before and nobody else gains access. Deletions sync the directory too.
 
 use crate::error::ChildDataError;
 use crate::find::STAGING_PREFIX;
@@ -10,19 +10,6 @@ use std::fs::File;
 use std::io::Write;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::Path;
-
-fn dir_of(path: &Path) -> &Path {
-    match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    }
-}
-
-fn sync_dir(dir: &Path) -> Result<(), ChildDataError> {
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(ChildDataError::io(dir))
-}
 
 /// Gives `file` the owner, group and mode `like` has; a warning when the owner cannot be
 /// given (not running as root), the file then belonging to this process's user.
@@ -48,21 +35,13 @@ fn take_over(file: &File, like: &std::fs::Metadata, path: &Path) -> Option<Strin
 /// owner could not be kept.
 pub fn replace_with_bytes(path: &Path, bytes: &[u8]) -> Result<Option<String>, ChildDataError> {
     let meta = std::fs::metadata(path).map_err(ChildDataError::io(path))?;
-    let dir = dir_of(path);
-    let mut tmp = tempfile::Builder::new()
-        .prefix(STAGING_PREFIX)
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(ChildDataError::io(dir))?;
-    tmp.write_all(bytes)
-        .map_err(ChildDataError::io(tmp.path()))?;
-    let warning = take_over(tmp.as_file(), &meta, path);
-    tmp.as_file()
-        .sync_all()
-        .map_err(ChildDataError::io(tmp.path()))?;
-    tmp.persist(path)
-        .map_err(|e| ChildDataError::io(path)(e.error))?;
-    sync_dir(dir)?;
+    let mut new = atomic_file::NewFile::with_prefix(path, STAGING_PREFIX, 0o600)
+        .map_err(ChildDataError::io(path))?;
+    new.file()
+        .write_all(bytes)
+        .map_err(ChildDataError::io(path))?;
+    let warning = take_over(new.file(), &meta, path);
+    new.commit().map_err(ChildDataError::io(path))?;
     Ok(warning)
 }
 
@@ -78,15 +57,13 @@ pub fn replace_with_file(path: &Path, new: &Path) -> Result<Option<String>, Chil
     let warning = take_over(&file, &meta, path);
     file.sync_all().map_err(ChildDataError::io(new))?;
     drop(file);
-    std::fs::rename(new, path).map_err(ChildDataError::io(path))?;
-    sync_dir(dir_of(path))?;
+    atomic_file::rename(new, path).map_err(ChildDataError::io(path))?;
     Ok(warning)
 }
 
 /// Deletes `path` and syncs its directory.
 pub fn delete(path: &Path) -> Result<(), ChildDataError> {
-    std::fs::remove_file(path).map_err(ChildDataError::io(path))?;
-    sync_dir(dir_of(path))
+    atomic_file::remove_file(path).map_err(ChildDataError::io(path))
 }
 
 #[cfg(test)]
