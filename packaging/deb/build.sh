@@ -139,6 +139,7 @@ for f in params/*.yaml; do
     -e 's#q_table_dir: "out/q_tables"#q_table_dir: "/var/lib/qt-therapy/q_tables"#' \
     -e 's#sessions_dir: "sessions"#sessions_dir: "/var/lib/qt-therapy/sessions"#' \
     -e 's#sessions_root: "out"#sessions_root: "/var/lib/qt-therapy/sessions"#' \
+    -e 's#retention_dir: ""#retention_dir: "/var/lib/qt-therapy/sessions"#' \
     "$f" >"$root/etc/qt-therapy/$(basename "$f")"
 done
 # The tablets reach the bridge over the robot's network, over HTTPS with the certificate the

@@ -68,7 +68,7 @@ struct Planned {
 
 /// One run directory's bag, written as its sessions are.
 struct RunBag {
-    writer: BagWriter<std::io::BufWriter<std::fs::File>>,
+    writer: bag_file::FileBagWriter,
     results: bag_file::Channel<SequenceResult>,
     decisions: bag_file::Channel<Decision>,
     proposals: bag_file::Channel<ActionProposal>,

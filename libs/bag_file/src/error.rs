@@ -147,6 +147,11 @@ pub enum BagError {
 }
 
 impl BagError {
+    /// True when the disk (or the quota) is full.
+    pub fn is_no_space(&self) -> bool {
+        matches!(self, BagError::Io { source, .. } if atomic_file::is_no_space(source))
+    }
+
     /// The damage errors a reader reports after reading everything before the bad record.
     pub fn record(&self) -> Option<&RecordAt> {
         match self {

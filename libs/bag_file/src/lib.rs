@@ -34,7 +34,9 @@ pub use bag_info::BagInfo;
 pub use error::{BagError, RecordAt};
 pub use reader::{BagReader, ReadOptions, Stamped};
 pub use scan::{ChannelInfo, RawMessage, SchemaInfo};
-pub use writer::{BagWriter, Channel, Compression, Stamp, WriterOptions, partial_path};
+pub use writer::{
+    BagWriter, Channel, Compression, FileBagWriter, Stamp, WriterOptions, partial_path,
+};
 
 /// The name of the metadata records of the wall clock's steps a recorder saw: `log_time` (on
 /// the recorder's steady clock, as every log time) and `by_ns` (negative: set back), decimal.

@@ -6,11 +6,11 @@ use crate::cdr;
 use crate::error::BagError;
 use crate::qos::offered_qos_yaml;
 use crate::scan::ChannelInfo;
+use atomic_file::GrowingFile;
 use qt_therapy_msgs::MessageDefinition;
 use qt_therapy_msgs::topics::Topic;
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{BufWriter, Seek, Write};
+use std::io::{Seek, Write};
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
@@ -99,16 +99,21 @@ pub struct BagWriter<W: Write + Seek> {
     rename: Option<(PathBuf, PathBuf)>,
 }
 
-impl BagWriter<BufWriter<File>> {
-    /// Creates `path` (written as `<path>.partial` until [`BagWriter::finish`]).
+/// A bag written to a file: `<bag>.partial`, each closed chunk written whole and durable at
+/// [`BagWriter::flush_chunk`] (`atomic_file::GrowingFile`), renamed when finished.
+pub type FileBagWriter = BagWriter<GrowingFile>;
+
+impl BagWriter<GrowingFile> {
+    /// Creates `path` (written as `<path>.partial` until [`BagWriter::finish`]); the partial
+    /// file must not exist.
     pub fn create(path: &Path, options: &WriterOptions) -> Result<Self, BagError> {
         let partial = partial_path(path);
         let bag = path.display().to_string();
-        let file = File::create(&partial).map_err(|source| BagError::Io {
+        let file = GrowingFile::create_new(&partial).map_err(|source| BagError::Io {
             bag: partial.display().to_string(),
             source,
         })?;
-        let mut writer = BagWriter::new(BufWriter::new(file), &bag, options)?;
+        let mut writer = BagWriter::new(file, &bag, options)?;
         writer.rename = Some((partial, path.to_path_buf()));
         Ok(writer)
     }
@@ -312,8 +317,9 @@ impl<W: Write + Seek> BagWriter<W> {
         Ok(())
     }
 
-    /// Closes the current chunk and hands the bytes to the operating system, so a reader (or
-    /// a recovery after a crash) sees every message written so far.
+    /// Closes the current chunk and flushes the bytes: a reader (or a recovery after a crash)
+    /// sees every message written so far, and for a file bag they are on disk (fdatasync), so
+    /// a power cut keeps them too.
     pub fn flush_chunk(&mut self) -> Result<(), BagError> {
         let bag = self.bag.clone();
         self.mcap()?
@@ -344,7 +350,7 @@ impl<W: Write + Seek> BagWriter<W> {
     }
 
     /// Writes the rosbag2 metadata record, the summary and the footer; a file bag is synced
-    /// and renamed to its final name. Returns the underlying writer.
+    /// and renamed to its final name (durably). Returns the underlying writer.
     pub fn finish(mut self) -> Result<W, BagError> {
         let bag = self.bag.clone();
         let final_name = self.rename.as_ref().map(|(_, f)| f.clone());
@@ -364,7 +370,7 @@ impl<W: Write + Seek> BagWriter<W> {
             source,
         })?;
         if let Some((partial, path)) = self.rename.take() {
-            std::fs::rename(&partial, &path).map_err(|source| BagError::Io { bag, source })?;
+            atomic_file::rename(&partial, &path).map_err(|source| BagError::Io { bag, source })?;
         }
         Ok(inner)
     }
@@ -424,6 +430,13 @@ impl<W: Write + Seek> Drop for BagWriter<W> {
 }
 
 fn write_error(bag: &str, what: &str, e: mcap::McapError) -> BagError {
+    // The operating system's error stays whole, so a full disk is told apart.
+    if let mcap::McapError::Io(source) = e {
+        return BagError::Io {
+            bag: format!("{bag}: writing {what}"),
+            source,
+        };
+    }
     BagError::Write {
         bag: bag.to_string(),
         what: what.to_string(),

@@ -11,6 +11,7 @@ pub mod node;
 pub mod params;
 pub mod protocol;
 pub mod recovery;
+pub mod retention;
 pub mod sequence;
 pub mod session_file;
 pub mod utterances;

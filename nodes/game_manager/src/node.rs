@@ -102,6 +102,8 @@ pub async fn run(
     tracing::info!(sessions_dir = %params.files.sessions_dir, language = %params.lines.language,
         time_scale = params.timing.time_scale, "game manager ready");
 
+    let disk = DiskLook::new(&params);
+    disk.keep_within_budget();
     let now = Now::of(&clock);
     let initial = match recovered_session(&mut core, &files, &params, now.steady_ns) {
         Some(r) => {
@@ -125,6 +127,11 @@ pub async fn run(
     if let Some(reason) = unheard {
         ctx.apply(core.handle(Input::RobotUnheard { reason }, Now::of(&clock)));
     }
+    let outputs = core.handle(disk.space(), Now::of(&clock));
+    ctx.apply(outputs);
+    let mut disk_tick =
+        tokio::time::interval(Duration::from_secs_f64(params.disk.disk_check_interval_s));
+    disk_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let stop = bus.shutdown_signal();
     tokio::pin!(stop);
     loop {
@@ -138,7 +145,15 @@ pub async fn run(
                 ctx.apply(outputs);
                 break;
             }
-            Some(c) = commands.recv() => Input::Command(c),
+            Some(c) = commands.recv() => {
+                // A start is judged on the disk as it is now, old bags deleted first if over.
+                if c.command == qt_therapy_msgs::TherapistCommand::START {
+                    disk.keep_within_budget();
+                }
+                let outputs = core.handle(disk.space(), Now::of(&clock));
+                ctx.apply(outputs);
+                Input::Command(c)
+            }
             Some(a) = answers.recv() => Input::Answer(a),
             Some(e) = engagement.recv() => Input::Engagement(e),
             Some(h) = heartbeats.recv() => Input::Heartbeat(h),
@@ -147,6 +162,14 @@ pub async fn run(
                 let result = change_parameters(&mut core, &change, params_file);
                 change.respond(result);
                 continue;
+            }
+            _ = disk_tick.tick() => {
+                disk.keep_within_budget();
+                if ctx.files.unsaved() > 0 {
+                    let outputs = core.handle(ctx.retry_unsaved(), Now::of(&clock));
+                    ctx.apply(outputs);
+                }
+                disk.space()
             }
             _ = clock.sleep_until(next_timer.unwrap_or_default()), if next_timer.is_some() => {
                 match ctx.timers.pop_first() {
@@ -319,24 +342,27 @@ impl Dispatch<'_> {
                 }
                 Output::Record(r) => match self.files.append(&r) {
                     Ok(path) => tracing::debug!(path = %path.display(), "sequence recorded"),
-                    // Keep the record in the log at least.
-                    Err(e) => tracing::error!(
-                        "{e}; record: {}",
-                        serde_json::to_string(&r).unwrap_or_default()
+                    // Kept in memory to be written later; in the log too.
+                    Err(e) => self.unsaved(
+                        e,
+                        format!("record: {}", serde_json::to_string(&r).unwrap_or_default()),
                     ),
                 },
                 Output::Journal(e) => match self.files.append_journal(&e) {
                     Ok(path) => tracing::debug!(path = %path.display(), "journal entry written"),
-                    Err(e2) => tracing::error!(
-                        "{e2}; journal entry: {}",
-                        serde_json::to_string(&e).unwrap_or_default()
+                    Err(e2) => self.unsaved(
+                        e2,
+                        format!(
+                            "journal entry: {}",
+                            serde_json::to_string(&e).unwrap_or_default()
+                        ),
                     ),
                 },
                 Output::Summary(s) => match self.files.write_summary(&s) {
                     Ok(path) => tracing::info!(path = %path.display(), "session summary written"),
-                    Err(e) => tracing::error!(
-                        "{e}; summary: {}",
-                        serde_json::to_string(&s).unwrap_or_default()
+                    Err(e) => self.unsaved(
+                        e,
+                        format!("summary: {}", serde_json::to_string(&s).unwrap_or_default()),
                     ),
                 },
                 // The operator's line, once: a log record (terminal, log file, journal, /rosout).
@@ -346,5 +372,91 @@ impl Dispatch<'_> {
             }
         }
         self.robot.detach();
+    }
+
+    /// A session-file write failed: logged with what it held; the core is told how many
+    /// writes wait (it warns the therapist), through the channel of inputs from our tasks.
+    fn unsaved(&mut self, e: crate::session_file::SessionFileError, what: String) {
+        tracing::error!("{e}; kept in memory to write when there is room; {what}");
+        let _ = self.decided.try_send(Input::FilesUnsaved {
+            unsaved: self.files.unsaved(),
+            reason: e.to_string(),
+        });
+    }
+
+    /// Writes what the disk had no room for before; what the core should know of it.
+    fn retry_unsaved(&mut self) -> Input {
+        let reason = match self.files.retry_unsaved() {
+            Ok(()) => String::new(),
+            Err(e) => e.to_string(),
+        };
+        Input::FilesUnsaved {
+            unsaved: self.files.unsaved(),
+            reason,
+        }
+    }
+}
+
+/// The node's looks at the disk of its sessions directory: the free space, and retention
+/// (`crate::retention`) when `retention_dir` is set.
+struct DiskLook {
+    sessions_dir: std::path::PathBuf,
+    retention_dir: Option<std::path::PathBuf>,
+    removes: Vec<crate::retention::Removable>,
+    budget: u64,
+    want_free: u64,
+}
+
+impl DiskLook {
+    fn new(params: &GameManagerParams) -> DiskLook {
+        let d = &params.disk;
+        DiskLook {
+            sessions_dir: params.files.sessions_dir.clone().into(),
+            retention_dir: (!d.retention_dir.is_empty()).then(|| d.retention_dir.clone().into()),
+            removes: d
+                .retention_removes
+                .iter()
+                .filter_map(|k| crate::retention::Removable::parse(k))
+                .collect(),
+            budget: (d.retention_budget_mb * 1e6) as u64,
+            want_free: (d.disk_warning_free_mb * 1e6) as u64,
+        }
+    }
+
+    /// The free space where the session files go (the nearest directory that exists).
+    fn space(&self) -> Input {
+        let mut dir = self.sessions_dir.as_path();
+        while !dir.is_dir() {
+            match dir.parent() {
+                Some(p) if !p.as_os_str().is_empty() => dir = p,
+                _ => {
+                    dir = std::path::Path::new(".");
+                    break;
+                }
+            }
+        }
+        match atomic_file::disk_space(dir) {
+            Ok(s) => Input::DiskSpace { free: s.free },
+            Err(e) => {
+                tracing::warn!("cannot measure the free space of {}: {e}", dir.display());
+                Input::DiskSpace { free: u64::MAX }
+            }
+        }
+    }
+
+    /// Deletes what retention allows when the runs are over their budget or the disk is low.
+    fn keep_within_budget(&self) {
+        let Some(root) = &self.retention_dir else {
+            return;
+        };
+        for line in crate::retention::apply(
+            root,
+            &self.sessions_dir,
+            &self.removes,
+            self.budget,
+            self.want_free,
+        ) {
+            tracing::warn!("{line}");
+        }
     }
 }

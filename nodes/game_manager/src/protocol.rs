@@ -68,6 +68,11 @@ pub enum Input {
     RobotUnheard { reason: String },
     /// The node is going down: save the session.
     Shutdown { reason: String },
+    /// The free space on the disk of the sessions directory (bytes), as the node measured it.
+    DiskSpace { free: u64 },
+    /// Session-file writes the disk had no room for, kept in memory by the node until they
+    /// can be made (0: all made since), and the last error.
+    FilesUnsaved { unsaved: usize, reason: String },
 }
 
 /// Severity of a log line: tracing's own, so every node's shell logs a core's lines alike

@@ -1,14 +1,15 @@
-//! The session files, so a crash loses nothing: `<session>.jsonl` gets one line per sequence,
-//! appended and fsync'd as soon as the sequence is scored; `<session>.journal` gets one line
-//! per start, therapist command carried out and tablet task, fsync'd before its effect is
-//! published, so a restarted node can take the session over (`crate::recovery`);
+//! The session files, so a crash or a power cut loses nothing: `<session>.jsonl` gets one line
+//! per sequence, appended and fsync'd as soon as the sequence is scored; `<session>.journal`
+//! gets one line per start, therapist command carried out and tablet task, fsync'd before its
+//! effect is published, so a restarted node can take the session over (`crate::recovery`);
 //! `<session>.summary.json` is written atomically (temp file + rename) when the session
-//! finishes, is stopped or emergency-stopped. Files are only ever appended to.
+//! finishes, is stopped or emergency-stopped. Files are only ever appended to, all through
+//! `atomic_file`. A full disk keeps what could not be written in memory until there is room.
 
+use atomic_file::AppendFile;
 use qt_therapy_msgs::SequenceResult;
 use serde::{Deserialize, Serialize};
-use std::fs::{File, OpenOptions};
-use std::io::{Read as _, Seek as _, SeekFrom, Write as _};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
 
 /// One line of the session file: the published result and what explains it.
@@ -204,10 +205,16 @@ fn write_err(path: &Path) -> impl FnOnce(std::io::Error) -> SessionFileError + '
     }
 }
 
-fn sync_dir(dir: &Path) -> Result<(), SessionFileError> {
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(write_err(dir))
+impl SessionFileError {
+    /// True when the disk (or the quota) is full.
+    pub fn is_no_space(&self) -> bool {
+        match self {
+            SessionFileError::CreateDir { source, .. } | SessionFileError::Write { source, .. } => {
+                atomic_file::is_no_space(source)
+            }
+            _ => false,
+        }
+    }
 }
 
 /// The session whose files are being written.
@@ -215,8 +222,6 @@ fn sync_dir(dir: &Path) -> Result<(), SessionFileError> {
 struct OpenSession {
     id: String,
     stem: String,
-    records: Option<File>,
-    journal: Option<File>,
 }
 
 /// Which of a session's append-only files.
@@ -233,6 +238,15 @@ impl Kind {
             Kind::Journal => "journal",
         }
     }
+}
+
+/// A write that failed (a full disk) and is kept, in order, until it can be made.
+#[derive(Debug)]
+enum Unsaved {
+    /// A line for an append-only file.
+    Line { path: PathBuf, line: String },
+    /// A summary, written whole; then its session's files are closed.
+    Summary { path: PathBuf, text: String },
 }
 
 /// Largest file a start-up scan reads: a session's files are a few kB; anything far larger is
@@ -259,33 +273,17 @@ pub struct UnfinishedFiles {
     pub journal: String,
 }
 
-/// Opens `path` to append, creating it; true if it was created. A crash mid-write can leave
-/// a last line without its newline: it is ended first, so the next line is not glued to it
-/// (the torn bytes stay, a damaged line that readers name and skip).
-fn open_append(path: &Path) -> std::io::Result<(File, bool)> {
-    let existed = path.exists();
-    let mut file = OpenOptions::new()
-        .create(true)
-        .append(true)
-        .read(true)
-        .open(path)?;
-    let len = file.metadata()?.len();
-    if existed && len > 0 {
-        let mut last = [0u8; 1];
-        file.seek(SeekFrom::Start(len - 1))?;
-        file.read_exact(&mut last)?;
-        if last[0] != b'\n' {
-            file.write_all(b"\n")?;
-        }
-    }
-    Ok((file, !existed))
-}
-
-/// Writes the session files of one node, one session at a time.
+/// Writes the session files of one node, one session at a time, through `atomic_file` (lines
+/// appended and fsync'd, summaries replaced whole). A write the disk has no room for is kept
+/// in memory, in order, and made by the next write or [`SessionFiles::retry_unsaved`]: the
+/// files stay whole (a failed append is cut back off) and nothing is written out of order.
 #[derive(Debug)]
 pub struct SessionFiles {
     dir: PathBuf,
     current: Option<OpenSession>,
+    /// The open append-only files, by path.
+    open: BTreeMap<PathBuf, AppendFile>,
+    unsaved: VecDeque<Unsaved>,
 }
 
 impl SessionFiles {
@@ -293,6 +291,8 @@ impl SessionFiles {
         SessionFiles {
             dir: dir.into(),
             current: None,
+            open: BTreeMap::new(),
+            unsaved: VecDeque::new(),
         }
     }
 
@@ -305,8 +305,6 @@ impl SessionFiles {
         self.current = Some(OpenSession {
             id: session_id.to_string(),
             stem: stem.to_string(),
-            records: None,
-            journal: None,
         });
     }
 
@@ -318,15 +316,23 @@ impl SessionFiles {
         {
             return Ok(open.stem.clone());
         }
-        std::fs::create_dir_all(&self.dir).map_err(|source| SessionFileError::CreateDir {
+        atomic_file::create_dir_all(&self.dir).map_err(|source| SessionFileError::CreateDir {
             path: self.dir.clone(),
             source,
         })?;
         let base = sanitized_stem(session_id);
+        let unsaved: BTreeSet<&Path> = self
+            .unsaved
+            .iter()
+            .map(|u| match u {
+                Unsaved::Line { path, .. } | Unsaved::Summary { path, .. } => path.as_path(),
+            })
+            .collect();
         let taken = |stem: &str| {
-            ["jsonl", "journal", "summary.json"]
-                .iter()
-                .any(|ext| self.dir.join(format!("{stem}.{ext}")).exists())
+            ["jsonl", "journal", "summary.json"].iter().any(|ext| {
+                let p = self.dir.join(format!("{stem}.{ext}"));
+                p.exists() || unsaved.contains(p.as_path())
+            })
         };
         let mut stem = base.clone();
         let mut n = 2;
@@ -337,8 +343,6 @@ impl SessionFiles {
         self.current = Some(OpenSession {
             id: session_id.to_string(),
             stem: stem.clone(),
-            records: None,
-            journal: None,
         });
         Ok(stem)
     }
@@ -366,31 +370,17 @@ impl SessionFiles {
             source,
         })?;
         line.push('\n');
-        let Some(open) = self.current.as_mut() else {
-            return Err(SessionFileError::Write {
-                path,
-                source: std::io::Error::other("no session is open"),
-            });
-        };
-        let slot = match kind {
-            Kind::Records => &mut open.records,
-            Kind::Journal => &mut open.journal,
-        };
-        let (file, created) = match slot.take() {
-            Some(f) => (f, false),
-            None => open_append(&path).map_err(write_err(&path))?,
-        };
-        let file = slot.insert(file);
-        // One write of the whole line, then fsync: a crash leaves at most a torn last line.
-        file.write_all(line.as_bytes()).map_err(write_err(&path))?;
-        file.sync_data().map_err(write_err(&path))?;
-        if created {
-            sync_dir(&self.dir)?;
-        }
+        self.unsaved.push_back(Unsaved::Line {
+            path: path.clone(),
+            line,
+        });
+        self.retry_unsaved()?;
         Ok(path)
     }
 
-    /// Writes the session summary atomically and closes the session; returns its path.
+    /// Writes the session summary atomically and closes the session; returns its path. When
+    /// the disk has no room, the summary is kept to be written later, and the session is closed
+    /// all the same (a new session gets files of its own).
     pub fn write_summary(&mut self, summary: &SessionSummary) -> Result<PathBuf, SessionFileError> {
         let stem = self.stem(&summary.session_id)?;
         let path = self.dir.join(format!("{stem}.summary.json"));
@@ -400,9 +390,47 @@ impl SessionFiles {
                 source,
             })?;
         text.push('\n');
-        atomic_file::write(&path, text.as_bytes()).map_err(write_err(&path))?;
+        self.unsaved.push_back(Unsaved::Summary {
+            path: path.clone(),
+            text,
+        });
         self.current = None;
+        self.retry_unsaved()?;
         Ok(path)
+    }
+
+    /// Writes, in order, what could not be written before (a full disk); stops at the first
+    /// write that fails again and returns its error. Ok once nothing is left unsaved.
+    pub fn retry_unsaved(&mut self) -> Result<(), SessionFileError> {
+        while let Some(next) = self.unsaved.front() {
+            match next {
+                Unsaved::Line { path, line } => {
+                    let file = match self.open.get_mut(path) {
+                        Some(f) => f,
+                        None => {
+                            let (f, _) = AppendFile::open(path, b'\n').map_err(write_err(path))?;
+                            self.open.entry(path.clone()).or_insert(f)
+                        }
+                    };
+                    file.append(line.as_bytes()).map_err(write_err(path))?;
+                }
+                Unsaved::Summary { path, text } => {
+                    atomic_file::write(path, text.as_bytes()).map_err(write_err(path))?;
+                    // The session is over: its append-only files are closed.
+                    let stem = path.to_string_lossy();
+                    let stem = stem.trim_end_matches(".summary.json").to_string();
+                    self.open
+                        .retain(|p, _| !p.to_string_lossy().starts_with(&format!("{stem}.")));
+                }
+            }
+            self.unsaved.pop_front();
+        }
+        Ok(())
+    }
+
+    /// How many lines and summaries wait for room on the disk.
+    pub fn unsaved(&self) -> usize {
+        self.unsaved.len()
     }
 
     /// Reads what a restarted node needs from the directory: the finished sessions' ids and

@@ -145,6 +145,9 @@ impl GameManager {
             if self.used_sessions.contains(&c.session_id) {
                 return refuse("this session id was already used; start a new session id");
             }
+            if let Some(why) = self.disk_refusal() {
+                return refuse(why);
+            }
             if c.user_id.is_empty() {
                 return refuse("user_id is empty");
             }

@@ -10,6 +10,7 @@
 
 mod commands;
 mod decide;
+mod disk;
 pub(crate) mod parameters;
 mod play;
 mod propose;
@@ -162,6 +163,8 @@ pub struct GameManager {
     /// The wall clock's offset from the steady clock, and its steps: every time the core keeps
     /// is steady, and is stamped by the wall clock's offset now.
     clock: ClockSteps,
+    /// The sessions' disk: free space and writes kept for want of it (`disk.rs`).
+    disk: disk::DiskWatch,
     out: Vec<Output>,
 }
 
@@ -201,6 +204,7 @@ impl GameManager {
             robot,
             proposals,
             clock: ClockSteps::new(),
+            disk: disk::DiskWatch::default(),
             out: Vec::new(),
         })
     }
@@ -267,6 +271,8 @@ impl GameManager {
                     self.end_session(SessionEnd::NodeShutdown, &reason, now);
                 }
             }
+            Input::DiskSpace { free } => self.on_disk_space(free, now),
+            Input::FilesUnsaved { unsaved, reason } => self.on_files_unsaved(unsaved, reason, now),
         }
         self.settle_robot();
         std::mem::take(&mut self.out)
@@ -387,6 +393,10 @@ impl GameManager {
         }
         if !lost.is_empty() {
             status = format!("node lost: {lost}; {status}");
+        }
+        // The disk first: the page takes it out for its own warning (GameState::disk_warning).
+        if let Some(warning) = self.disk_warning() {
+            status = format!("{}{warning}; {status}", GameState::DISK_WARNING_PREFIX);
         }
         let answered = &self.answered;
         let msg = match &self.session {

@@ -134,6 +134,29 @@ parameter_groups! {
         sessions_dir: String = "sessions".into(),
     }
 
+    /// The disk the session files and the bag go to: the warning, the floor, the budget and
+    /// what retention may delete to keep within it (`retention.rs`).
+    disk: DiskParams {
+        /// Below this much free space (MB) on the sessions' disk, GameState.status (the
+        /// therapist page) warns.
+        disk_warning_free_mb: f64 = 500.0,
+        /// Below this much free space (MB) a START is refused, with the reason.
+        disk_floor_free_mb: f64 = 100.0,
+        /// Seconds (real) between two looks at the free space; it is also looked at before
+        /// every therapist command.
+        disk_check_interval_s: f64 = 10.0,
+        /// Directory of the run directories the budget covers (the service's sessions/);
+        /// "" turns retention off.
+        retention_dir: String = String::new(),
+        /// Most the run directories under retention_dir may hold (MB).
+        retention_budget_mb: f64 = 20000.0,
+        /// What retention deletes, kind by kind in this order, oldest run first, while the
+        /// runs are over the budget or the disk is below disk_warning_free_mb: "bags",
+        /// "reports", "logs". Session files, Q-tables and the running session's run
+        /// directory are never deleted.
+        retention_removes: Vec<String> = strings(&["bags", "reports", "logs"]),
+    }
+
     /// What the robot says, and the faces and gestures that go with it.
     lines: LineParams {
         /// Language of the robot's lines: "en" or "de".

@@ -24,7 +24,7 @@ fn shipped_yaml_is_the_default_and_valid() {
 }
 
 /// Every key of the parameter file, in the order an unknown key's error lists them.
-const KEYS: [&str; 51] = [
+const KEYS: [&str; 57] = [
     "seed",
     "sequences_per_session",
     "max_identical_in_a_row",
@@ -39,6 +39,12 @@ const KEYS: [&str; 51] = [
     "policy_startup_wait_s",
     "engagement_wait_s",
     "sessions_dir",
+    "disk_warning_free_mb",
+    "disk_floor_free_mb",
+    "disk_check_interval_s",
+    "retention_dir",
+    "retention_budget_mb",
+    "retention_removes",
     "language",
     "intro_en",
     "intro_de",
@@ -163,6 +169,18 @@ fn bad_values_name_their_key() {
         ),
         (with(|p| p.timing.time_scale = 0.0), "time_scale"),
         (with(|p| p.lines.language = "fr".into()), "language"),
+        (
+            with(|p| p.disk.disk_floor_free_mb = 600.0),
+            "disk_floor_free_mb",
+        ),
+        (
+            with(|p| p.disk.retention_removes = strings(&["q_tables"])),
+            "retention_removes",
+        ),
+        (
+            with(|p| p.disk.disk_check_interval_s = 0.0),
+            "disk_check_interval_s",
+        ),
         (
             with(|p| p.timing.speaking_time_base_s = -9.0),
             "speaking_time_base_s",

@@ -2,8 +2,8 @@
 //! refuses to start on the first one that fails, in the file's order.
 
 use super::{
-    FileParams, GameManagerParams, LineParams, ReliabilityParams, RobotParams, SessionParams,
-    SupervisionParams, TimingParams,
+    DiskParams, FileParams, GameManagerParams, LineParams, ReliabilityParams, RobotParams,
+    SessionParams, SupervisionParams, TimingParams,
 };
 
 /// A parameter the game manager cannot work with.
@@ -36,10 +36,52 @@ impl GameManagerParams {
         self.session.validate()?;
         self.timing.validate()?;
         self.files.validate()?;
+        self.disk.validate()?;
         self.lines.validate()?;
         self.reliability.validate()?;
         self.robot.validate()?;
         self.supervision.validate()
+    }
+}
+
+impl DiskParams {
+    /// The floor under the warning, both sizes; retention's kinds known.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let mb = |key, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                bad(key, format!("{v} is not a size in MB (0 or more)"))
+            }
+        };
+        mb("disk_warning_free_mb", self.disk_warning_free_mb)?;
+        mb("disk_floor_free_mb", self.disk_floor_free_mb)?;
+        mb("retention_budget_mb", self.retention_budget_mb)?;
+        if self.disk_floor_free_mb > self.disk_warning_free_mb {
+            return bad(
+                "disk_floor_free_mb",
+                format!(
+                    "{} is above disk_warning_free_mb ({}): the page would not warn before a \
+                     start is refused",
+                    self.disk_floor_free_mb, self.disk_warning_free_mb
+                ),
+            );
+        }
+        seconds(
+            "disk_check_interval_s",
+            self.disk_check_interval_s,
+            0.1,
+            3600.0,
+        )?;
+        for kind in &self.retention_removes {
+            if crate::retention::Removable::parse(kind).is_none() {
+                return bad(
+                    "retention_removes",
+                    format!("{kind:?} is not \"bags\", \"reports\" or \"logs\""),
+                );
+            }
+        }
+        Ok(())
     }
 }
 

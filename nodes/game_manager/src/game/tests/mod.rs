@@ -3,6 +3,7 @@
 mod answers;
 mod clock;
 mod commands;
+mod disk;
 mod harness;
 mod heartbeats;
 mod parameters;
