@@ -66,6 +66,17 @@ pub async fn run(
     params: TabletBridgeParams,
     pages: mpsc::Receiver<PageEvent>,
 ) -> anyhow::Result<()> {
+    // A parameter file kept from before `sessions_root` existed (a conffile changed on the
+    // robot) leaves the default, where no session is stored: said once here, not left as an
+    // empty child list on the therapist page with no reason anywhere.
+    if !std::path::Path::new(&params.sessions_root).is_dir() {
+        tracing::warn!(
+            sessions_root = %params.sessions_root,
+            "no such directory: the therapist page lists no children until a session is stored \
+             there (set tablet_bridge.sessions_root to the game manager's sessions directory; \
+             installed: /var/lib/qt-therapy/sessions)"
+        );
+    }
     let commands = bus.publisher(THERAPIST_COMMAND)?;
     let answers = bus.publisher(TABLET_ANSWER)?;
     let (dds_tx, dds_rx) = mpsc::channel(256);
