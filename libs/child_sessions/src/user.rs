@@ -56,18 +56,7 @@ impl UserId {
 
     /// The id for a file name: anything but letters, digits, '-', '_' and '.' becomes '_'.
     pub fn file_stem(&self) -> String {
-        let s: String = self
-            .id
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        s.trim_start_matches('.').to_string()
+        sequence_game::id_file_stem(&self.id)
     }
 
     /// Whether `text` names this user as a whole token, in any of its written forms.

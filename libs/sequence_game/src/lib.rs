@@ -519,9 +519,35 @@ pub fn stable_id_hash(id: &str) -> u64 {
     })
 }
 
+/// A session or user id as a file-name stem: anything but ASCII letters, digits, '-', '_' and
+/// '.' becomes '_', and no leading '.' (ids may hold any printable character, names may not).
+/// One rule, so the files the game manager names are the files a child's tools find. May be
+/// empty (an id of dots only); the caller names that case.
+pub fn id_file_stem(id: &str) -> String {
+    let stem: String = id
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    stem.trim_start_matches('.').to_string()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_id_becomes_a_safe_file_stem() {
+        assert_eq!(id_file_stem("../a b"), "_a_b");
+        assert_eq!(id_file_stem("child-7_x.y"), "child-7_x.y");
+        assert_eq!(id_file_stem("Jörg/1"), "J_rg_1");
+        assert_eq!(id_file_stem("..."), "");
+    }
 
     #[test]
     fn state_index_round_trips_over_the_whole_space() {

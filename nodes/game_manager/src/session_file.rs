@@ -184,17 +184,7 @@ pub enum SessionFileError {
 
 /// File-name stem for a session id: ids may hold any printable character, names may not.
 pub fn sanitized_stem(session_id: &str) -> String {
-    let s: String = session_id
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    let s = s.trim_start_matches('.').to_string();
+    let s = sequence_game::id_file_stem(session_id);
     if s.is_empty() { "session".into() } else { s }
 }
 
