@@ -10,15 +10,12 @@
 //!   cargo test -p suite_tests --test clock_step -- --nocapture
 //!   QT_KEEP_TEST_OUTPUT=1 ...   keeps each run's directory (bag, logs, session files)
 
-use qt_therapy_msgs::topics::{
-    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,
-    ROBOT_SPEECH, SEQUENCE_RESULT, TABLET_ANSWER,
-};
+use qt_therapy_msgs::topics::{GAME_STATE, HEARTBEAT};
 use qt_therapy_msgs::{GameState, Heartbeat};
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use suite_tests::{run_in_loopback_netns, workspace_bin};
+use suite_tests::{COUNTED_TOPICS, gaps_and_repeats, run_in_loopback_netns, workspace_bin};
 
 /// Debian's libfaketime (package `libfaketime`, which `faketime` pulls in), the thread-safe
 /// build: every node runs several threads.
@@ -26,31 +23,6 @@ const LIBFAKETIME: &str = "/usr/lib/x86_64-linux-gnu/faketime/libfaketimeMT.so.1
 
 /// The session's pace: a session takes about 30 s.
 const TIME_SCALE: f64 = 0.05;
-
-/// Reliable topics with one publisher in the main job: every sequence number between the first
-/// and the last recorded must be in the bag once (as tests/frozen_process.rs counts them).
-const COUNTED_TOPICS: [&str; 7] = [
-    SEQUENCE_RESULT.name,
-    TABLET_ANSWER.name,
-    DECISION.name,
-    EXPECTED_ENGAGEMENT.name,
-    ROBOT_SPEECH.name,
-    ROBOT_EMOTION.name,
-    ROBOT_GESTURE.name,
-];
-
-/// Lost (gaps) and duplicated numbers of one publisher.
-fn gaps_and_repeats(numbers: &[u64]) -> (u64, u64) {
-    let distinct: BTreeSet<u64> = numbers.iter().copied().collect();
-    let span = match (distinct.first(), distinct.last()) {
-        (Some(a), Some(b)) => b - a + 1,
-        _ => 0,
-    };
-    (
-        span - distinct.len() as u64,
-        (numbers.len() - distinct.len()) as u64,
-    )
-}
 
 /// What one stepped session left.
 struct SteppedRun {

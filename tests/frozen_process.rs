@@ -16,15 +16,14 @@
 //!   session that has room for all seven
 
 use qt_therapy_msgs::topics::{
-    DECISION, EXPECTED_ENGAGEMENT, GAME_STATE, HEARTBEAT, ROBOT_EMOTION, ROBOT_GESTURE,
-    ROBOT_SPEECH, SEQUENCE_RESULT, TABLET_ANSWER, TABLET_TASK, THERAPIST_COMMAND,
+    DECISION, GAME_STATE, HEARTBEAT, SEQUENCE_RESULT, TABLET_TASK, THERAPIST_COMMAND,
 };
 use qt_therapy_msgs::{
     Decision, GameState, Heartbeat, SequenceResult, TabletTask, TherapistCommand,
 };
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
-use suite_tests::{run_in_loopback_netns, workspace_bin};
+use suite_tests::{COUNTED_TOPICS, gaps_and_repeats, run_in_loopback_netns, workspace_bin};
 
 /// The nodes of the main job in the order they are stopped: the k-th once the console printed
 /// sequence k and the one before was continued.
@@ -40,34 +39,6 @@ const STOPS: [&str; 7] = [
 
 /// No stop starts after this sequence's line, so each ends before the session does.
 const LAST_SEQUENCE_TO_STOP_AFTER: u8 = 8;
-
-/// Reliable topics with one publisher in the main job and a history deep enough (100) to
-/// hold what is published while a reader is stopped: every sequence number between the first
-/// and the last recorded must be in the bag once. The keep-last-1 topics (GameState,
-/// TabletTask, UserModelInfo) keep only their newest sample by design; the tasks are checked
-/// one per sequence below.
-const COUNTED_TOPICS: [&str; 7] = [
-    SEQUENCE_RESULT.name,
-    TABLET_ANSWER.name,
-    DECISION.name,
-    EXPECTED_ENGAGEMENT.name,
-    ROBOT_SPEECH.name,
-    ROBOT_EMOTION.name,
-    ROBOT_GESTURE.name,
-];
-
-/// Lost (gaps) and duplicated sequence numbers of one publisher.
-fn gaps_and_repeats(numbers: &[u64]) -> (u64, u64) {
-    let distinct: BTreeSet<u64> = numbers.iter().copied().collect();
-    let span = match (distinct.first(), distinct.last()) {
-        (Some(a), Some(b)) => b - a + 1,
-        _ => 0,
-    };
-    (
-        span - distinct.len() as u64,
-        (numbers.len() - distinct.len()) as u64,
-    )
-}
 
 /// The time a line `<prefix><node> pid <pid> at <epoch seconds>` of the script gives.
 fn script_time(script_out: &str, prefix: &str, node: &str) -> Option<(u32, f64)> {

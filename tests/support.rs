@@ -113,3 +113,30 @@ pub fn whole_session_in_bag(
         decisions,
     }
 }
+
+/// Reliable topics with one publisher in the main job and a history deep enough (100) to hold
+/// what is published while a reader is stopped or a clock is stepped: every sequence number
+/// between the first and the last recorded must be in the bag once. The keep-last-1 topics
+/// (GameState, TabletTask, UserModelInfo) keep only their newest sample by design.
+pub const COUNTED_TOPICS: [&str; 7] = [
+    qt_therapy_msgs::topics::SEQUENCE_RESULT.name,
+    qt_therapy_msgs::topics::TABLET_ANSWER.name,
+    qt_therapy_msgs::topics::DECISION.name,
+    qt_therapy_msgs::topics::EXPECTED_ENGAGEMENT.name,
+    qt_therapy_msgs::topics::ROBOT_SPEECH.name,
+    qt_therapy_msgs::topics::ROBOT_EMOTION.name,
+    qt_therapy_msgs::topics::ROBOT_GESTURE.name,
+];
+
+/// Lost (gaps) and duplicated sequence numbers of one publisher.
+pub fn gaps_and_repeats(numbers: &[u64]) -> (u64, u64) {
+    let distinct: std::collections::BTreeSet<u64> = numbers.iter().copied().collect();
+    let span = match (distinct.first(), distinct.last()) {
+        (Some(a), Some(b)) => b - a + 1,
+        _ => 0,
+    };
+    (
+        span - distinct.len() as u64,
+        (numbers.len() - distinct.len()) as u64,
+    )
+}
