@@ -108,28 +108,27 @@ pub fn score_and_level_svg(
             .draw()
             .map_err(draw_err)?;
         let at = |i: usize| i as f64 + 1.0;
-        chart
-            .draw_series(points.iter().enumerate().map(|(i, p)| {
-                let x = at(i);
-                Rectangle::new(
-                    [(x - 0.38, 0.0), (x + 0.38, f64::from(p.max_score))],
-                    BEST.filled(),
-                )
-            }))
-            .map_err(draw_err)?
-            .label(words.best_possible)
-            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], BEST.filled()));
-        chart
-            .draw_series(points.iter().enumerate().map(|(i, p)| {
-                let x = at(i);
-                Rectangle::new(
-                    [(x - 0.2, 0.0), (x + 0.2, f64::from(p.score))],
-                    SCORE.filled(),
-                )
-            }))
-            .map_err(draw_err)?
-            .label(words.score)
-            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], SCORE.filled()));
+        // The best possible score as a wide pale bar, the score as a narrow dark one inside it.
+        type Bar<'w> = (f64, RGBColor, &'w str, fn(&SessionPoint) -> i32);
+        let bars: [Bar; 2] = [
+            (0.38, BEST, words.best_possible, |p| p.max_score),
+            (0.2, SCORE, words.score, |p| p.score),
+        ];
+        for (half_width, colour, label, value) in bars {
+            chart
+                .draw_series(points.iter().enumerate().map(|(i, p)| {
+                    let x = at(i);
+                    Rectangle::new(
+                        [(x - half_width, 0.0), (x + half_width, f64::from(value(p)))],
+                        colour.filled(),
+                    )
+                }))
+                .map_err(draw_err)?
+                .label(label)
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 6), (x + 14, y + 6)], colour.filled())
+                });
+        }
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperLeft)
