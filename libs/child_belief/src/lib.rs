@@ -80,6 +80,11 @@ pub trait Belief {
     }
     /// Sequences observed so far.
     fn observations(&self) -> usize;
+    /// How many of the child's own sequences were played at `input` (forgetting applied),
+    /// where the belief keeps count.
+    fn evidence(&self, _input: ModelInput) -> Option<f64> {
+        None
+    }
 }
 
 impl<B: Belief + ?Sized> Belief for Box<B> {
@@ -97,6 +102,9 @@ impl<B: Belief + ?Sized> Belief for Box<B> {
     }
     fn observations(&self) -> usize {
         (**self).observations()
+    }
+    fn evidence(&self, input: ModelInput) -> Option<f64> {
+        (**self).evidence(input)
     }
 }
 

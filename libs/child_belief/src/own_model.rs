@@ -572,6 +572,10 @@ impl Belief for OwnModel {
     fn observations(&self) -> usize {
         self.observed
     }
+
+    fn evidence(&self, input: ModelInput) -> Option<f64> {
+        self.success.weight.get(input.index()).copied()
+    }
 }
 
 #[cfg(test)]

@@ -117,6 +117,22 @@ pub fn plan(
     caution: f64,
     from_step: u8,
 ) -> BeliefPlan {
+    plan_within(model, learning, baseline, caution, from_step, |_, _, _| {
+        true
+    })
+}
+
+/// As [`plan`], but an action the `baseline` would not take is open to the plan at (state,
+/// step) only where `may_leave(state, step, its input)` says so (SPIBB's bootstrapped set: see
+/// [`Evidence`]).
+pub fn plan_within(
+    model: &UserModelTable,
+    learning: &Learning,
+    baseline: Option<&Baseline>,
+    caution: f64,
+    from_step: u8,
+    may_leave: impl Fn(State, u8, ModelInput) -> bool,
+) -> BeliefPlan {
     let inputs = input_values(model, learning);
     let mut actions = [[0u8; STATE_COUNT]; SEQUENCES_PER_SESSION];
     let mut values = [[0.0; STATE_COUNT]; SEQUENCES_PER_SESSION];
@@ -132,6 +148,10 @@ pub fn plan(
                 let Some((input, _)) = transition(state, *action, Outcome::Success) else {
                     continue;
                 };
+                let follows = baseline.is_none_or(|b| b.takes(state, *action));
+                if !follows && !may_leave(state, step, input) {
+                    continue;
+                }
                 let v = &inputs[input.index()];
                 let mut q = 0.0;
                 for outcome in Outcome::ALL {
@@ -144,7 +164,6 @@ pub fn plan(
                     };
                     q += po * (v.reward[outcome.index()] + learning.gamma * next[after.index()]);
                 }
-                let follows = baseline.is_none_or(|b| b.takes(state, *action));
                 if !follows {
                     q -= caution * v.reward_sd;
                 }
@@ -234,6 +253,48 @@ impl CompiledPolicy {
     }
 }
 
+/// How the guard judges a deviation from the baseline: on the plan's advantage A over the
+/// baseline from this state to the session's end, under each model drawn from the belief.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GuardTest {
+    /// mean(A) > κ sd(A): the gain must stand out from the belief's doubt about it.
+    Sigma { caution: f64 },
+    /// As `Sigma`, with κ falling as the child's sequences n accumulate: κ h / (h + n) (h:
+    /// `half`, the sequences after which κ is halved).
+    Fading { caution: f64, half: f64 },
+    /// A chance constraint on the session's return: mean(A) > 0, and in all but a share
+    /// `risk` of the drawn models the return the session loses against the baseline from
+    /// here, γ^(step − 1) max(0, −A), is at most the session's margin left: `margin` less what
+    /// the session's earlier deviations risked (each its loss at that same quantile).
+    Chance { margin: f64, risk: f64 },
+}
+
+impl GuardTest {
+    /// The test as it applies now: after `observations` sequences of the child, with `spent`
+    /// of the session's margin risked already.
+    pub fn threshold(&self, observations: usize, spent: f64) -> Threshold {
+        match *self {
+            GuardTest::Sigma { caution } => Threshold::Sigma(caution),
+            GuardTest::Fading { caution, half } => {
+                Threshold::Sigma(caution * half / (half + observations as f64))
+            }
+            GuardTest::Chance { margin, risk } => Threshold::Chance {
+                margin: (margin - spent).max(0.0),
+                risk,
+            },
+        }
+    }
+}
+
+/// A guard test with its numbers for this decision.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Threshold {
+    /// mean(A) > κ sd(A).
+    Sigma(f64),
+    /// mean(A) > 0 and the loss at the (1 − risk) quantile at most `margin`.
+    Chance { margin: f64, risk: f64 },
+}
+
 /// What the guard found before leaving the baseline: the plan's advantage over the baseline
 /// from this state to the session's end, its mean and standard deviation over the models
 /// drawn from the belief.
@@ -243,14 +304,19 @@ pub struct Guard {
     pub advantage_sd: f64,
     /// The mean over the models of the loss against the baseline, max(0, −advantage).
     pub expected_loss: f64,
+    /// The session's return the deviation risks: γ^(step − 1) max(0, −A) at the chance
+    /// test's quantile (at the largest loss drawn for the σ tests).
+    pub risked_loss: f64,
+    /// The test as applied.
+    pub threshold: Threshold,
     /// The plan's action was played (else the baseline's).
     pub deviated: bool,
 }
 
 /// The plan's action at `state` and `step` where the baseline takes it too; elsewhere the
-/// plan's action only if, over the `models` drawn from the belief, the plan's advantage over
-/// the baseline from here to the session's end has a mean above `caution` standard
-/// deviations, else the baseline's (its tie broken by `u`).
+/// plan's action only if the plan's advantage over the baseline from here to the session's
+/// end, over the `models` drawn from the belief, passes `threshold`; else the baseline's
+/// (its tie broken by `u`).
 #[allow(clippy::too_many_arguments)]
 pub fn guarded_action(
     plan: &BeliefPlan,
@@ -259,7 +325,7 @@ pub fn guarded_action(
     learning: &Learning,
     state: State,
     step: u8,
-    caution: f64,
+    threshold: Threshold,
     u: f64,
 ) -> (Action, Option<Guard>) {
     let planned = plan.action(state, step);
@@ -278,7 +344,33 @@ pub fn guarded_action(
     let mean = advantages.iter().sum::<f64>() / n;
     let sd = (advantages.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n).sqrt();
     let expected_loss = advantages.iter().map(|a| (-a).max(0.0)).sum::<f64>() / n;
-    let deviated = !advantages.is_empty() && mean > caution * sd;
+    // The session's return lost, discounted to the session's start, sorted.
+    let discount = learning.gamma.powi(i32::from(step.max(1)) - 1);
+    let mut losses: Vec<f64> = advantages
+        .iter()
+        .map(|a| discount * (-a).max(0.0))
+        .collect();
+    losses.sort_by(f64::total_cmp);
+    let at_quantile = |q: f64| -> f64 {
+        if losses.is_empty() {
+            return f64::INFINITY;
+        }
+        let k = ((q * losses.len() as f64).ceil() as usize).clamp(1, losses.len()) - 1;
+        losses[k]
+    };
+    let (deviated, risked_loss) = match threshold {
+        Threshold::Sigma(caution) => (
+            !advantages.is_empty() && mean > caution * sd,
+            at_quantile(1.0),
+        ),
+        Threshold::Chance { margin, risk } => {
+            let risked = at_quantile(1.0 - risk);
+            (
+                !advantages.is_empty() && mean > 0.0 && risked <= margin,
+                risked,
+            )
+        }
+    };
     let action = if deviated {
         planned
     } else {
@@ -290,6 +382,8 @@ pub fn guarded_action(
             advantage: mean,
             advantage_sd: sd,
             expected_loss,
+            risked_loss,
+            threshold,
             deviated,
         }),
     )
@@ -305,10 +399,14 @@ pub enum PlanningRule {
     Sampling,
     /// As `Mean`, an action the baseline would not take paying κ times its reward's σ.
     Cautious { caution: f64 },
-    /// As `Mean`, but the plan leaves the baseline only where `guarded_action` lets it (the
-    /// plan's advantage above `caution` standard deviations), on `samples` models drawn from
-    /// the belief.
-    Guarded { caution: f64, samples: usize },
+    /// As `Mean`, but the plan leaves the baseline only where `guarded_action` lets it, on
+    /// `samples` models drawn from the belief.
+    Guarded { test: GuardTest, samples: usize },
+    /// Safe policy improvement with baseline bootstrapping (SPIBB, Laroche et al. 2019, for a
+    /// deterministic baseline): as `Mean`, but the plan may leave the baseline at a state only
+    /// where the child has been seen at least `min_observations` times at the input the
+    /// baseline's action sets up and at the input of the action taken instead.
+    Spibb { min_observations: f64 },
 }
 
 /// One decision planned on the belief, with what it was based on.
@@ -317,6 +415,9 @@ pub struct BeliefDecision {
     pub action: Action,
     /// The plan's own action, before the guard.
     pub planned: Action,
+    /// The baseline's action here (its tie broken as the played one's would be); `None`
+    /// without a baseline.
+    pub baseline: Option<Action>,
     /// The guard's finding where the plan left the baseline.
     pub guard: Option<Guard>,
     /// The return the belief expects from here to the session's end with the plan.
@@ -332,11 +433,13 @@ pub struct BeliefPolicy<B> {
     learning: Learning,
     rule: PlanningRule,
     session_plan: Option<BeliefPlan>,
+    /// The session's margin the chance guard's deviations have risked so far.
+    session_risked: f64,
 }
 
 impl<B: Belief> BeliefPolicy<B> {
-    /// `baseline`: what the plan stays near (needed by `Cautious` and `Guarded`; without one
-    /// they plan as `Mean`).
+    /// `baseline`: what the plan stays near (needed by `Cautious`, `Guarded` and `Spibb`;
+    /// without one they plan as `Mean`).
     pub fn new(
         belief: B,
         baseline: Option<Baseline>,
@@ -349,6 +452,7 @@ impl<B: Belief> BeliefPolicy<B> {
             learning,
             rule,
             session_plan: None,
+            session_risked: 0.0,
         }
     }
 
@@ -360,9 +464,19 @@ impl<B: Belief> BeliefPolicy<B> {
         self.baseline.as_ref()
     }
 
-    /// A new session: posterior sampling draws its model from `rng` and plans the session on
-    /// it.
+    /// A different baseline (e.g. the cluster's table after it learned); the belief stays.
+    pub fn set_baseline(&mut self, baseline: Option<Baseline>) {
+        self.baseline = baseline;
+    }
+
+    pub fn rule(&self) -> PlanningRule {
+        self.rule
+    }
+
+    /// A new session: the chance guard's margin is whole again, and posterior sampling
+    /// draws its model from `rng` and plans the session on it.
     pub fn start_session(&mut self, rng: &mut ChaCha8Rng) {
+        self.session_risked = 0.0;
         self.session_plan = match self.rule {
             PlanningRule::Sampling => {
                 Some(plan(&self.belief.sample(rng), &self.learning, None, 0.0, 1))
@@ -380,35 +494,66 @@ impl<B: Belief> BeliefPolicy<B> {
         u: f64,
         rng: &mut ChaCha8Rng,
     ) -> BeliefDecision {
+        let baseline_action = self.baseline.as_ref().map(|b| b.action(state, step, u));
         if let Some(p) = &self.session_plan {
             let a = p.action(state, step);
             return BeliefDecision {
                 action: a,
                 planned: a,
+                baseline: baseline_action,
                 guard: None,
                 expected_value: p.value(state, step),
             };
         }
         let (baseline, caution) = match (self.rule, &self.baseline) {
             (PlanningRule::Cautious { caution }, Some(b)) => (Some(b), caution),
+            (PlanningRule::Spibb { .. }, Some(b)) => (Some(b), 0.0),
             _ => (None, 0.0),
         };
         let predictive = self.belief.predictive();
-        let p = plan(&predictive, &self.learning, baseline, caution, step);
+        let p = match (self.rule, baseline) {
+            (PlanningRule::Spibb { min_observations }, Some(b)) => {
+                let belief = &self.belief;
+                let seen =
+                    |input: ModelInput| belief.evidence(input).unwrap_or(0.0) >= min_observations;
+                plan_within(
+                    &predictive,
+                    &self.learning,
+                    Some(b),
+                    0.0,
+                    step,
+                    |s, k, input| {
+                        let own = b.action(s, k, 0.0);
+                        seen(input)
+                            && transition(s, own, Outcome::Success)
+                                .is_some_and(|(own_input, _)| seen(own_input))
+                    },
+                )
+            }
+            _ => plan(&predictive, &self.learning, baseline, caution, step),
+        };
         let planned = p.action(state, step);
         let mut decision = BeliefDecision {
             action: planned,
             planned,
+            baseline: baseline_action,
             guard: None,
             expected_value: p.value(state, step),
         };
-        if let (PlanningRule::Guarded { caution, samples }, Some(b)) = (self.rule, &self.baseline) {
+        if let (PlanningRule::Guarded { test, samples }, Some(b)) = (self.rule, &self.baseline) {
             if b.takes(state, planned) {
                 return decision;
             }
             let models = self.belief.samples(rng, samples);
+            let threshold = test.threshold(self.belief.observations(), self.session_risked);
             let (action, guard) =
-                guarded_action(&p, b, &models, &self.learning, state, step, caution, u);
+                guarded_action(&p, b, &models, &self.learning, state, step, threshold, u);
+            if let Some(g) = &guard
+                && g.deviated
+                && matches!(test, GuardTest::Chance { .. })
+            {
+                self.session_risked += g.risked_loss;
+            }
             decision.action = action;
             decision.guard = guard;
         }

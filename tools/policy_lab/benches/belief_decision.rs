@@ -11,7 +11,7 @@
 //! the time other programs had the processor), and the ratios of the belief policy's to the
 //! current policy's.
 
-use child_belief::planner::{Baseline, BeliefPolicy, PlanningRule};
+use child_belief::planner::{Baseline, BeliefPolicy, GuardTest, PlanningRule};
 use child_belief::{Observation, OwnModel};
 use policy_lab::child_study::per_child::{StudySpec, cases, cluster_table};
 use policy_lab::child_study::per_child_belief::{BeliefSpec, Start, learned_prior, library_cases};
@@ -104,7 +104,9 @@ fn main() -> anyhow::Result<()> {
             Some(Baseline::of_table(&table)),
             spec.learning,
             PlanningRule::Guarded {
-                caution: belief_spec.caution,
+                test: GuardTest::Sigma {
+                    caution: belief_spec.caution,
+                },
                 samples: belief_spec.guard_samples,
             },
         );

@@ -120,7 +120,7 @@ fn the_guard_leaves_the_baseline_only_for_a_gain_the_drawn_models_agree_on() {
         &l,
         State::START,
         1,
-        1.0,
+        Threshold::Sigma(1.0),
         0.5,
     );
     assert_eq!(a, planned);
@@ -145,7 +145,7 @@ fn the_guard_leaves_the_baseline_only_for_a_gain_the_drawn_models_agree_on() {
         &l,
         State::START,
         1,
-        1.0,
+        Threshold::Sigma(1.0),
         0.5,
     );
     assert_eq!(a, Action::SetLevel(Level::ONE));
@@ -162,7 +162,7 @@ fn the_guard_leaves_the_baseline_only_for_a_gain_the_drawn_models_agree_on() {
         &l,
         State::START,
         1,
-        0.0,
+        Threshold::Sigma(0.0),
         0.5,
     );
     assert_eq!(a, planned);
@@ -178,8 +178,249 @@ fn the_guard_leaves_the_baseline_only_for_a_gain_the_drawn_models_agree_on() {
         &l,
         state,
         2,
-        1.0,
+        Threshold::Sigma(1.0),
         0.5,
     );
     assert!(g.is_none());
+}
+
+/// Models where levels 2 and 3 fail and engagement is low: leaving level 1 loses there.
+fn failing_above_level_one() -> UserModelTable {
+    UserModelTable::tabulate(
+        0,
+        |i| Prediction {
+            mean: if i.level == Level::ONE { 0.95 } else { 0.0 },
+            std: 0.0,
+        },
+        |_, _| Prediction {
+            mean: -0.5,
+            std: 0.0,
+        },
+    )
+}
+
+#[test]
+fn the_chance_guard_leaves_the_baseline_only_where_the_sessions_loss_stays_within_its_margin() {
+    let l = learning();
+    let baseline = Baseline::of_table(&level_one_table());
+    let good = model(0.0);
+    let bad = failing_above_level_one();
+    let p = plan(&good, &l, None, 0.0, 1);
+    let planned = p.action(State::START, 1);
+    let models = [good.clone(), good.clone(), bad.clone()];
+    let guard =
+        |threshold| guarded_action(&p, &baseline, &models, &l, State::START, 1, threshold, 0.5);
+    // The loss under the bad model, from the session's start (step 1: not discounted).
+    let loss = {
+        let planned = CompiledPolicy::new(1, |s, k| p.action(s, k));
+        let base = CompiledPolicy::new(1, |s, k| baseline.action(s, k, 0.0));
+        base.value(&bad, &l, State::START) - planned.value(&bad, &l, State::START)
+    };
+    assert!(loss > 1.0, "{loss}");
+    // One model in three loses: at risk 0.1 that loss is what the deviation risks.
+    let (a, g) = guard(Threshold::Chance {
+        margin: 1.0,
+        risk: 0.1,
+    });
+    let g = g.expect("judged");
+    assert_eq!(a, Action::SetLevel(Level::ONE));
+    assert!(!g.deviated && (g.risked_loss - loss).abs() < 1e-9, "{g:?}");
+    // A margin as large as that loss lets it through; so does a risk of one in two.
+    let (a, _) = guard(Threshold::Chance {
+        margin: loss + 1e-9,
+        risk: 0.1,
+    });
+    assert_eq!(a, planned);
+    let (a, g) = guard(Threshold::Chance {
+        margin: 0.0,
+        risk: 0.5,
+    });
+    assert_eq!(a, planned);
+    assert_eq!(g.expect("judged").risked_loss, 0.0);
+    // Later in the session the same loss weighs γ^(step − 1) in the session's return.
+    let state = State::after(Level::ONE, Feedback::None, Outcome::Success);
+    let p5 = plan(&good, &l, None, 0.0, 5);
+    if !baseline.takes(state, p5.action(state, 5)) {
+        let (_, g) = guarded_action(
+            &p5,
+            &baseline,
+            std::slice::from_ref(&bad),
+            &l,
+            state,
+            5,
+            Threshold::Chance {
+                margin: 0.0,
+                risk: 0.0,
+            },
+            0.5,
+        );
+        let planned = CompiledPolicy::new(5, |s, k| p5.action(s, k));
+        let base = CompiledPolicy::new(5, |s, k| baseline.action(s, k, 0.0));
+        let a = planned.value(&bad, &l, state) - base.value(&bad, &l, state);
+        let g = g.expect("judged");
+        assert!((g.risked_loss - l.gamma.powi(4) * (-a).max(0.0)).abs() < 1e-9);
+    }
+    // The tests as they apply after n sequences and with some margin spent.
+    let fading = GuardTest::Fading {
+        caution: 1.0,
+        half: 10.0,
+    };
+    assert_eq!(fading.threshold(0, 0.0), Threshold::Sigma(1.0));
+    assert_eq!(fading.threshold(10, 0.0), Threshold::Sigma(0.5));
+    let chance = GuardTest::Chance {
+        margin: 1.0,
+        risk: 0.1,
+    };
+    assert_eq!(
+        chance.threshold(50, 0.75),
+        Threshold::Chance {
+            margin: 0.25,
+            risk: 0.1
+        }
+    );
+    assert_eq!(
+        chance.threshold(50, 2.0),
+        Threshold::Chance {
+            margin: 0.0,
+            risk: 0.1
+        }
+    );
+}
+
+/// A belief that is a known list of models: its draws go round the list, its predictive model
+/// is the first, and it counts the sequences seen at each input.
+struct Known {
+    models: Vec<UserModelTable>,
+    next: std::cell::Cell<usize>,
+    seen: Vec<f64>,
+}
+
+impl Known {
+    fn new(models: Vec<UserModelTable>) -> Self {
+        Known {
+            models,
+            next: std::cell::Cell::new(0),
+            seen: vec![0.0; SUCCESS_INPUTS],
+        }
+    }
+}
+
+impl Belief for Known {
+    fn observe(&mut self, o: &Observation) {
+        self.seen[o.input.index()] += 1.0;
+    }
+    fn predictive(&self) -> UserModelTable {
+        self.models[0].clone()
+    }
+    fn sample(&self, _rng: &mut ChaCha8Rng) -> UserModelTable {
+        let k = self.next.get();
+        self.next.set(k + 1);
+        self.models[k % self.models.len()].clone()
+    }
+    fn observations(&self) -> usize {
+        self.seen.iter().sum::<f64>() as usize
+    }
+    fn evidence(&self, input: ModelInput) -> Option<f64> {
+        Some(self.seen[input.index()])
+    }
+}
+
+fn rng() -> ChaCha8Rng {
+    <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1)
+}
+
+#[test]
+fn the_chance_guard_spends_the_sessions_margin_and_gets_it_back_at_the_next_session() {
+    let l = learning();
+    let baseline = Baseline::of_table(&level_one_table());
+    let good = model(0.0);
+    // Every draw is the good model but one in four that fails above level 1.
+    let belief = Known::new(vec![
+        good.clone(),
+        good.clone(),
+        good.clone(),
+        failing_above_level_one(),
+    ]);
+    let mut policy = BeliefPolicy::new(
+        belief,
+        Some(baseline),
+        l,
+        PlanningRule::Guarded {
+            test: GuardTest::Chance {
+                margin: 100.0,
+                risk: 0.0,
+            },
+            samples: 4,
+        },
+    );
+    policy.start_session(&mut rng());
+    let first = policy.decide(State::START, 1, 0.5, &mut rng());
+    let g = first.guard.expect("the plan leaves level 1");
+    assert!(g.deviated && g.risked_loss > 0.0, "{g:?}");
+    assert_eq!(
+        g.threshold,
+        Threshold::Chance {
+            margin: 100.0,
+            risk: 0.0
+        }
+    );
+    // The next deviation has what is left of the margin.
+    let again = policy.decide(State::START, 1, 0.5, &mut rng());
+    let h = again.guard.expect("judged");
+    assert_eq!(
+        h.threshold,
+        Threshold::Chance {
+            margin: 100.0 - g.risked_loss,
+            risk: 0.0
+        }
+    );
+    policy.start_session(&mut rng());
+    let fresh = policy.decide(State::START, 1, 0.5, &mut rng());
+    assert_eq!(
+        fresh.guard.expect("judged").threshold,
+        Threshold::Chance {
+            margin: 100.0,
+            risk: 0.0
+        }
+    );
+    assert_eq!(fresh.baseline, Some(Action::SetLevel(Level::ONE)));
+}
+
+#[test]
+fn spibb_leaves_the_baseline_only_between_inputs_the_child_was_seen_at() {
+    let l = learning();
+    let baseline = Baseline::of_table(&level_one_table());
+    let good = model(0.0);
+    let mut policy = BeliefPolicy::new(
+        Known::new(vec![good.clone()]),
+        Some(baseline.clone()),
+        l,
+        PlanningRule::Spibb {
+            min_observations: 2.0,
+        },
+    );
+    // Nothing seen: the baseline's level 1 everywhere.
+    let d = policy.decide(State::START, 1, 0.5, &mut rng());
+    assert_eq!(d.action, Action::SetLevel(Level::ONE));
+    // The unconstrained plan's choice at the start, and the two inputs SPIBB needs seen.
+    let free = plan(&good, &l, None, 0.0, 1).action(State::START, 1);
+    assert_ne!(free, Action::SetLevel(Level::ONE));
+    let input_of = |a| {
+        transition(State::START, a, Outcome::Success)
+            .expect("allowed")
+            .0
+    };
+    let seen = |input| Observation::new(input, Outcome::Success, 0.0).expect("observation");
+    for _ in 0..2 {
+        policy.observe(&seen(input_of(free)));
+    }
+    // Only the deviation's input seen: still the baseline's.
+    let d = policy.decide(State::START, 1, 0.5, &mut rng());
+    assert_eq!(d.action, Action::SetLevel(Level::ONE));
+    for _ in 0..2 {
+        policy.observe(&seen(input_of(Action::SetLevel(Level::ONE))));
+    }
+    let d = policy.decide(State::START, 1, 0.5, &mut rng());
+    assert_eq!(d.action, free);
+    assert!(d.guard.is_none());
 }

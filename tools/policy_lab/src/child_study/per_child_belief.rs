@@ -10,7 +10,7 @@
 
 use super::per_child::{ChildCase, SessionRun, StudySpec, cluster_table, seed_of, session_draws};
 use child_belief::library::KnownModel;
-use child_belief::planner::{Baseline, BeliefPolicy, PlanningRule};
+use child_belief::planner::{Baseline, BeliefPolicy, GuardTest, PlanningRule};
 use child_belief::{
     Belief, BeliefError, LearnedCovariance, LibraryParams, ModelPosterior, Observation, OwnModel,
     OwnModelParams,
@@ -57,6 +57,16 @@ pub enum Planning {
     /// belief, must have a mean above `caution` standard deviations; else the baseline's
     /// action.
     Guarded,
+    /// As `Guarded`, κ falling as the child's sequences n accumulate: κ h / (h + n), h
+    /// `BeliefSpec::fading_half`.
+    Fading,
+    /// As `Guarded`, but the test is a chance constraint on the session's return: a mean gain,
+    /// and in all but `BeliefSpec::chance_risk` of the drawn models the session loses at most
+    /// what is left of `BeliefSpec::chance_margin` against the baseline.
+    Chance,
+    /// SPIBB: the posterior-mean plan, leaving the baseline only between inputs the child
+    /// was seen at `BeliefSpec::spibb_min_observations` times.
+    Spibb,
 }
 
 /// What the belief starts from.
@@ -91,6 +101,9 @@ impl BeliefArm {
                 Planning::Sampling => "sampling",
                 Planning::Cautious => "cautious",
                 Planning::Guarded => "guarded",
+                Planning::Fading => "fading guard",
+                Planning::Chance => "chance guard",
+                Planning::Spibb => "SPIBB",
             },
             match self.start {
                 Start::Cluster => "cluster",
@@ -123,6 +136,14 @@ pub struct BeliefSpec {
     pub baseline_sessions: usize,
     /// Models drawn from the belief for the guard.
     pub guard_samples: usize,
+    /// Fading guard: the child's sequences after which κ is halved.
+    pub fading_half: f64,
+    /// Chance guard: the session's return it may risk against the baseline, and the share of
+    /// drawn models allowed past it.
+    pub chance_margin: f64,
+    pub chance_risk: f64,
+    /// SPIBB: the child's sequences at an input before the plan may use it.
+    pub spibb_min_observations: f64,
 }
 
 impl Default for BeliefSpec {
@@ -138,6 +159,10 @@ impl Default for BeliefSpec {
             caution: 0.5,
             baseline_sessions: 0,
             guard_samples: 32,
+            fading_half: 50.0,
+            chance_margin: 0.5,
+            chance_risk: 0.1,
+            spibb_min_observations: 2.0,
         }
     }
 }
@@ -340,8 +365,27 @@ pub fn run_belief_seed(
             caution: belief_spec.caution,
         },
         Planning::Guarded => PlanningRule::Guarded {
-            caution: belief_spec.caution,
+            test: GuardTest::Sigma {
+                caution: belief_spec.caution,
+            },
             samples: belief_spec.guard_samples,
+        },
+        Planning::Fading => PlanningRule::Guarded {
+            test: GuardTest::Fading {
+                caution: belief_spec.caution,
+                half: belief_spec.fading_half,
+            },
+            samples: belief_spec.guard_samples,
+        },
+        Planning::Chance => PlanningRule::Guarded {
+            test: GuardTest::Chance {
+                margin: belief_spec.chance_margin,
+                risk: belief_spec.chance_risk,
+            },
+            samples: belief_spec.guard_samples,
+        },
+        Planning::Spibb => PlanningRule::Spibb {
+            min_observations: belief_spec.spibb_min_observations,
         },
     };
     let mut policy = BeliefPolicy::new(
@@ -410,7 +454,7 @@ pub fn run_belief_arm(
     belief_spec: &BeliefSpec,
     spec: &StudySpec,
 ) -> Result<Vec<SessionRun>, BeliefError> {
-    let baseline = (matches!(arm.planning, Planning::Cautious | Planning::Guarded)
+    let baseline = (arm.planning != Planning::Mean && arm.planning != Planning::Sampling
         || belief_spec.baseline_sessions > 0)
         .then(|| Baseline::of_table(&baseline_table(cases, index, arm.start, spec)));
     (0..spec.seeds)

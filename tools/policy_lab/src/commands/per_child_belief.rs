@@ -100,6 +100,19 @@ pub struct Args {
     /// Guarded planning: models drawn from the belief to judge a deviation.
     #[arg(long, default_value_t = BeliefSpec::default().guard_samples)]
     guard_samples: usize,
+    /// Fading guard: the child's sequences after which κ is halved.
+    #[arg(long, default_value_t = BeliefSpec::default().fading_half)]
+    fading_half: f64,
+    /// Chance guard: the session's return a session's deviations may risk against the
+    /// baseline.
+    #[arg(long, default_value_t = BeliefSpec::default().chance_margin)]
+    chance_margin: f64,
+    /// Chance guard: the share of drawn models allowed to lose more.
+    #[arg(long, default_value_t = BeliefSpec::default().chance_risk)]
+    chance_risk: f64,
+    /// SPIBB: the child's sequences at an input before the plan may use it.
+    #[arg(long, default_value_t = BeliefSpec::default().spibb_min_observations)]
+    spibb_min_observations: f64,
     /// Only the first N children play (each still in the others' libraries).
     #[arg(long, default_value_t = usize::MAX, hide_default_value = true)]
     children: usize,
@@ -120,14 +133,19 @@ fn parse_arm(s: &str) -> anyhow::Result<BeliefArm> {
             "library" => Representation::Library,
             "own" => Representation::OwnModel,
             "learned" => Representation::OwnModelLearned,
-            _ => anyhow::bail!("arm {s:?}: representation is library or own"),
+            _ => anyhow::bail!("arm {s:?}: representation is library, own or learned"),
         },
         planning: match *p {
             "mean" => Planning::Mean,
             "sampling" => Planning::Sampling,
             "cautious" => Planning::Cautious,
             "guarded" => Planning::Guarded,
-            _ => anyhow::bail!("arm {s:?}: planning is mean or sampling"),
+            "fading" => Planning::Fading,
+            "chance" => Planning::Chance,
+            "spibb" => Planning::Spibb,
+            _ => anyhow::bail!(
+                "arm {s:?}: planning is mean, sampling, cautious, guarded, fading, chance or spibb"
+            ),
         },
         start: match *st {
             "cluster" => Start::Cluster,
@@ -317,6 +335,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         caution: args.caution,
         baseline_sessions: args.baseline_sessions,
         guard_samples: args.guard_samples,
+        fading_half: args.fading_half,
+        chance_margin: args.chance_margin,
+        chance_risk: args.chance_risk,
+        spibb_min_observations: args.spibb_min_observations,
     };
     belief_spec.library.validate()?;
     belief_spec.own_model.validate()?;
