@@ -187,6 +187,13 @@ ros_message! {
         pub explored: bool,
         pub exploitation_only: bool,
         pub model_used: String,
+        pub planned_on_belief: bool,
+        pub belief_observations: u32,
+        pub belief_success: Vec<f64>,
+        pub belief_success_sd: Vec<f64>,
+        pub belief_engagement: Vec<f64>,
+        pub belief_engagement_sd: Vec<f64>,
+        pub baseline_action: u8,
     }
 }
 

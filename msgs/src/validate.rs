@@ -364,6 +364,31 @@ impl Validate for Decision {
         if self.q_values.len() != 5 || self.q_values.iter().any(|q| !q.is_finite()) {
             return fail(M, "q_values must be 5 finite numbers");
         }
+        check_range(M, "baseline_action", self.baseline_action, 0, 4)?;
+        let levels = [
+            ("belief_success", &self.belief_success, 0.0, 1.0),
+            ("belief_success_sd", &self.belief_success_sd, 0.0, f64::MAX),
+            ("belief_engagement", &self.belief_engagement, -1.0, 1.0),
+            (
+                "belief_engagement_sd",
+                &self.belief_engagement_sd,
+                0.0,
+                f64::MAX,
+            ),
+        ];
+        for (field, values, lo, hi) in levels {
+            let expected = if self.planned_on_belief { 3 } else { 0 };
+            if values.len() != expected || values.iter().any(|v| !(lo..=hi).contains(v)) {
+                return fail(
+                    M,
+                    format!(
+                        "{field} must hold {expected} numbers in [{lo}, {hi}] (planned_on_belief \
+                         {})",
+                        self.planned_on_belief
+                    ),
+                );
+            }
+        }
         Ok(())
     }
 }

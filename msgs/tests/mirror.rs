@@ -473,6 +473,13 @@ fn every_type_round_trips_through_cdr_exactly() {
         explored: true,
         exploitation_only: false,
         model_used: "cluster 1".into(),
+        planned_on_belief: true,
+        belief_observations: 12,
+        belief_success: vec![0.9, 0.6, 0.25],
+        belief_success_sd: vec![0.05, 0.1, 0.2],
+        belief_engagement: vec![0.5, 0.25, -0.125],
+        belief_engagement_sd: vec![0.1, 0.2, 0.3],
+        baseline_action: 2,
     };
     round_trip(decision.clone());
     round_trip(UserModelInfo {

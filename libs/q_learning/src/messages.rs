@@ -60,6 +60,13 @@ pub fn decision_message(
         explored: d.explored,
         exploitation_only: d.mode == Mode::Exploit,
         model_used,
+        planned_on_belief: false,
+        belief_observations: 0,
+        belief_success: Vec::new(),
+        belief_success_sd: Vec::new(),
+        belief_engagement: Vec::new(),
+        belief_engagement_sd: Vec::new(),
+        baseline_action: d.action.index() as u8,
     }
 }
 

@@ -22,6 +22,25 @@ pub fn decision_reason(d: &Decision) -> String {
     let p = |i: usize| d.probabilities.get(i).copied().unwrap_or(f64::NAN);
     let a = usize::from(d.action);
     let name = action_label(a);
+    if d.planned_on_belief {
+        // The plan on the child's belief: what the table would have done, where it differs.
+        let from_table = if d.baseline_action == d.action {
+            "as the table".to_string()
+        } else {
+            format!("table: {}", action_label(usize::from(d.baseline_action)))
+        };
+        let levels = d
+            .belief_success
+            .iter()
+            .map(|p| format!("{:.0}%", 100.0 * p))
+            .collect::<Vec<_>>()
+            .join("/");
+        return format!(
+            "policy planned on the child's belief: {name} ({from_table}; P(right) by level {levels} \
+             after {} sequences) [{}]",
+            d.belief_observations, d.model_used
+        );
+    }
     if d.explored {
         // The best allowed action (probability > 0), to show what exploring gave up.
         let best = (0..d.q_values.len())
@@ -186,6 +205,19 @@ mod tests {
         assert!(
             greedy.starts_with("policy greedy: level 2 (Q=0.90"),
             "{greedy}"
+        );
+        let planned = decision_reason(&Decision {
+            planned_on_belief: true,
+            belief_observations: 14,
+            belief_success: vec![0.9, 0.55, 0.2],
+            baseline_action: 2,
+            action: 1,
+            ..d.clone()
+        });
+        assert_eq!(
+            planned,
+            "policy planned on the child's belief: level 2 (table: level 3; P(right) by level \
+             90%/55%/20% after 14 sequences) [cluster 0]"
         );
         let r = SequenceResult {
             sequence_index: 3,

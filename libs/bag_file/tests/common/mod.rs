@@ -212,6 +212,7 @@ pub fn write_session<W: Write + Seek>(w: &mut BagWriter<W>) -> Vec<Expected> {
             explored: false,
             exploitation_only: false,
             model_used: "q_table".into(),
+            ..Default::default()
         },
     );
     s.put(
