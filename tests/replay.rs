@@ -353,9 +353,14 @@ fn compare_seconds(
 // ---------------------------------------------------------------------------------------
 // The behaviour policy
 
-/// "cluster 1 (out/.../cluster_1.json, 4 updates)" -> ("cluster 1", "cluster_1.json", 4).
+/// "cluster 1 (out/.../cluster_1.json, 4 updates)" -> ("cluster 1", "cluster_1.json", 4); a
+/// decision planned on the child's belief names the table after " near ".
 fn model_used(d: &Decision) -> (String, String, u64) {
-    let parsed = d.model_used.split_once(" (").and_then(|(owner, rest)| {
+    let table = d
+        .model_used
+        .rsplit_once(" near ")
+        .map_or(d.model_used.as_str(), |(_, t)| t);
+    let parsed = table.split_once(" (").and_then(|(owner, rest)| {
         let (path, updates) = rest.strip_suffix(" updates)")?.rsplit_once(", ")?;
         let file = Path::new(path).file_name()?.to_str()?.to_string();
         Some((owner.to_string(), file, updates.parse().ok()?))
@@ -462,6 +467,7 @@ fn replay_policy(bag_of: &BagReader, run: PolicyRun) -> PolicyReplay {
             )
         })
         .collect();
+    let on_belief = decisions.iter().any(|(_, d)| d.planned_on_belief);
     let answers = Arc::new(Mutex::new(Vec::new()));
     let got = answers.clone();
     let (bag, q_tables) = virtual_time(async move {
@@ -484,6 +490,14 @@ fn replay_policy(bag_of: &BagReader, run: PolicyRun) -> PolicyReplay {
         ];
         if run == PolicyRun::PerUserTables {
             overrides.push("per_user_q_tables:=true".into());
+        }
+        // Planned on the child's belief as the session was (the main job's launch turns it on).
+        if on_belief {
+            overrides.push("child_belief:=true".into());
+            overrides.push(absolute(
+                "child_belief_prior_file",
+                &defaults.child_belief_prior_file,
+            ));
         }
         let (params, path) =
             parameters::<behaviour_policy::BehaviourPolicyParams>("behaviour_policy", &overrides);
@@ -526,6 +540,12 @@ fn replay_policy(bag_of: &BagReader, run: PolicyRun) -> PolicyReplay {
             .filter_map(Result::ok)
             .map(|e| e.path())
             .filter(|p| p.extension().is_some_and(|x| x == "json"))
+            // The children's belief files beside the tables are not Q-tables.
+            .filter(|p| {
+                !p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with("belief_"))
+            })
             .map(|p| {
                 let name = p
                     .file_name()

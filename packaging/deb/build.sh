@@ -127,6 +127,8 @@ install -m 0755 packaging/deb/start "$root/usr/lib/qt-therapy/start"
 install -m 0644 -D -t "$root/usr/share/qt-therapy/models/user_model" nodes/user_model/models/*.json
 install -m 0644 -D -t "$root/usr/share/qt-therapy/models/engagement_classifier" \
   nodes/engagement_classifier/models/*.json
+install -m 0644 -D -t "$root/usr/share/qt-therapy/models/behaviour_policy" \
+  nodes/behaviour_policy/models/*.json
 install -m 0644 launch_scripts/tablet_session.launch.yaml launch_scripts/simulated_session.launch.yaml \
   "$root/usr/share/qt-therapy/launch/"
 install -m 0644 packaging/deb/qt-therapy.service "$root/lib/systemd/system/"
@@ -136,6 +138,7 @@ install -m 0644 packaging/deb/qt-therapy.service "$root/lib/systemd/system/"
 for f in params/*.yaml; do
   sed -e 's#"nodes/user_model/models/#"/usr/share/qt-therapy/models/user_model/#' \
     -e 's#"nodes/engagement_classifier/models/#"/usr/share/qt-therapy/models/engagement_classifier/#' \
+    -e 's#"nodes/behaviour_policy/models/#"/usr/share/qt-therapy/models/behaviour_policy/#' \
     -e 's#q_table_dir: "out/q_tables"#q_table_dir: "/var/lib/qt-therapy/q_tables"#' \
     -e 's#sessions_dir: "sessions"#sessions_dir: "/var/lib/qt-therapy/sessions"#' \
     -e 's#sessions_root: "out"#sessions_root: "/var/lib/qt-therapy/sessions"#' \

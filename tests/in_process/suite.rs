@@ -138,6 +138,7 @@ fn workspace_file(relative: &str) -> String {
 }
 
 const USER_MODELS: &str = "nodes/user_model/models/migrave_study_c2.json";
+const CHILD_BELIEF_PRIOR: &str = "nodes/behaviour_policy/models/child_belief_prior_c2.json";
 
 impl Suite {
     /// An empty bus on a virtual clock (call inside a runtime whose time is paused), writing
@@ -181,9 +182,15 @@ impl Suite {
         let mut o: Vec<String> = match node {
             Node::Recorder => vec![],
             Node::UserModel => vec![format!("model_file:={}", workspace_file(USER_MODELS))],
+            // As the launch file: the child's decisions planned on a belief about them.
             Node::Policy => vec![
                 format!("user_model_file:={}", workspace_file(USER_MODELS)),
                 format!("q_table_dir:={out}/q_tables"),
+                "child_belief:=true".into(),
+                format!(
+                    "child_belief_prior_file:={}",
+                    workspace_file(CHILD_BELIEF_PRIOR)
+                ),
             ],
             Node::Classifier => vec![format!(
                 "model_file:={}",

@@ -7,10 +7,12 @@
 //! sampling), and a summary per level for the therapist, the bag and replay. `planner`
 //! decides on a belief: backward induction over the rest of the session on the paper's MDP
 //! (`q_learning::mdp`), within the action mask, near a baseline table where it is unsure.
+//! `prior_file` carries a prior covariance learned offline to the node.
 
 pub mod library;
 pub mod own_model;
 pub mod planner;
+pub mod prior_file;
 mod summary;
 
 pub use library::{LibraryParams, ModelPosterior};
@@ -41,12 +43,13 @@ pub enum BeliefError {
 }
 
 /// One observed sequence: the input (L, F, PS) it was played at, whether the child answered
-/// right, and its engagement E in [-1, 1].
+/// right, and its engagement E in [-1, 1] (`None` where no face was seen: the answer alone
+/// is evidence).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Observation {
     pub input: ModelInput,
     pub outcome: Outcome,
-    pub engagement: f64,
+    pub engagement: Option<f64>,
 }
 
 impl Observation {
@@ -58,8 +61,17 @@ impl Observation {
         Ok(Observation {
             input,
             outcome,
-            engagement,
+            engagement: Some(engagement),
         })
+    }
+
+    /// A sequence whose engagement was not seen (no face in its period).
+    pub fn without_engagement(input: ModelInput, outcome: Outcome) -> Self {
+        Observation {
+            input,
+            outcome,
+            engagement: None,
+        }
     }
 }
 

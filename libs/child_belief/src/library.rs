@@ -67,7 +67,9 @@ fn log_likelihood(params: &LibraryParams, model: &UserModelTable, o: &Observatio
         Outcome::Success => p,
         Outcome::Failure => 1.0 - p,
     };
-    let z = (o.engagement - model.engagement(o.input, o.outcome).mean) / params.engagement_sd;
+    let z = o.engagement.map_or(0.0, |e| {
+        (e - model.engagement(o.input, o.outcome).mean) / params.engagement_sd
+    });
     answer.ln() - 0.5 * z * z
 }
 

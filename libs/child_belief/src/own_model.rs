@@ -160,12 +160,17 @@ impl FiniteGp {
     }
 
     fn observe(&mut self, index: usize, value: f64, forgetting: f64) {
+        self.fade(forgetting);
+        self.weight[index] += 1.0;
+        self.weighted_sum[index] += value;
+    }
+
+    /// Every earlier value's weight times `forgetting`, as before an observation.
+    fn fade(&mut self, forgetting: f64) {
         if forgetting < 1.0 {
             self.weight.iter_mut().for_each(|w| *w *= forgetting);
             self.weighted_sum.iter_mut().for_each(|s| *s *= forgetting);
         }
-        self.weight[index] += 1.0;
-        self.weighted_sum[index] += value;
     }
 
     /// `None` before any value (the posterior is the prior).
@@ -541,8 +546,13 @@ impl Belief for OwnModel {
         let lambda = self.params.forgetting;
         let right = f64::from(u8::from(o.outcome == Outcome::Success));
         self.success.observe(o.input.index(), right, lambda);
-        self.engagement
-            .observe(o.input.engagement_index(o.outcome), o.engagement, lambda);
+        match o.engagement {
+            Some(e) => self
+                .engagement
+                .observe(o.input.engagement_index(o.outcome), e, lambda),
+            // No face seen: the answer speaks, the engagement GP only ages.
+            None => self.engagement.fade(lambda),
+        }
         self.observed += 1;
     }
 

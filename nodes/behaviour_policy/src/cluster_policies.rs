@@ -6,6 +6,7 @@
 //! decides for them and learns from their sessions; the cluster's table still learns from all
 //! of its users, so a new user starts from the group's experience.
 
+use crate::child_beliefs::{BeliefServeError, ChildBeliefs, PlannedDecision};
 use crate::persistent::{Opened, PersistentError, PersistentPolicy};
 use q_learning::learning::{Learning, Mode, QTable};
 use q_learning::messages::{ResultError, decision_message, transition};
@@ -43,6 +44,8 @@ pub enum ServeError {
     Result(#[from] ResultError),
     #[error(transparent)]
     Persistent(#[from] PersistentError),
+    #[error("child belief: {0}")]
+    Belief(#[from] BeliefServeError),
 }
 
 /// One owner's table (a cluster's or a user's): in use, or refused when it was opened.
@@ -109,6 +112,8 @@ pub struct ClusterPolicies {
     users: Option<BTreeMap<String, OwnedTable>>,
     /// User ids that cannot name a file: served by their cluster's table (warned once each).
     unnamed_users: BTreeSet<String>,
+    /// Per-child beliefs planned on (`child_belief`); None: the tables decide alone.
+    beliefs: Option<ChildBeliefs>,
 }
 
 impl ClusterPolicies {
@@ -145,7 +150,15 @@ impl ClusterPolicies {
             seed,
             users: None,
             unnamed_users: BTreeSet::new(),
+            beliefs: None,
         }
+    }
+
+    /// Plans every named child's decisions on a belief about them, near the table that would
+    /// decide for them, and teaches it their results (`child_beliefs`).
+    pub fn with_child_beliefs(mut self, beliefs: Option<ChildBeliefs>) -> Self {
+        self.beliefs = beliefs;
+        self
     }
 
     /// Gives every user a table of their own (`dir/user_<id>.json`), started from their
@@ -273,12 +286,22 @@ impl ClusterPolicies {
             .to_state()
             .map_err(|e| ServeError::State(e.reason))?;
         let d = policy.decide(state, request.step)?;
-        Ok(decision_message(
-            &d,
-            header,
+        let table_used = model_used(policy);
+        let table = policy.core().q_table().clone();
+        let mut message = decision_message(&d, header, &request.session_id, table_used);
+        let Some(beliefs) = self.beliefs.as_mut().filter(|b| b.serves(&request.user_id)) else {
+            return Ok(message);
+        };
+        let planned = beliefs.decide(
+            &request.user_id,
             &request.session_id,
-            model_used(policy),
-        ))
+            k,
+            &table,
+            state,
+            request.step,
+        )?;
+        planned_message(&mut message, &planned, state)?;
+        Ok(message)
     }
 
     /// Learns from one result and saves its cluster's table, and with per-user tables the
@@ -299,15 +322,26 @@ impl ClusterPolicies {
         let cluster = self
             .ready(k)
             .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
-        if !per_user {
-            return cluster;
-        }
-        let user = self
-            .policy_for(&result.user_id, k)
-            .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
-        match (cluster, user) {
+        let tables = if per_user {
+            let user = self
+                .policy_for(&result.user_id, k)
+                .and_then(|p| Ok(p.learn_sequence(session, index, &t)?));
+            match (cluster, user) {
+                (Err(e), _) => Err(e),
+                (Ok(_), user) => user,
+            }
+        } else {
+            cluster
+        };
+        // The child's belief learns whatever the tables made of it: it is theirs alone.
+        let belief = match self.beliefs.as_mut() {
+            Some(b) if b.serves(&result.user_id) => b.learn(result, k).map(|_| ()),
+            _ => Ok(()),
+        };
+        match (tables, belief) {
             (Err(e), _) => Err(e),
-            (Ok(_), user) => user,
+            (Ok(_), Err(e)) => Err(e.into()),
+            (Ok(u), Ok(())) => Ok(u),
         }
     }
 }
@@ -351,6 +385,38 @@ fn open_user_table(
             )),
         },
     )
+}
+
+/// The Decision message of a decision planned on the child's belief: its action, level and
+/// feedback, a probability of 1 on it (the plan is the belief's, drawn from nothing the
+/// softmax sets), the belief per level, and the table's own choice beside it.
+fn planned_message(
+    message: &mut qt_therapy_msgs::Decision,
+    planned: &PlannedDecision,
+    state: sequence_game::State,
+) -> Result<(), ServeError> {
+    let d = &planned.decision;
+    let (level, feedback) = d.action.apply(state).ok_or_else(|| {
+        ServeError::State(format!("the plan's {} cannot follow {state}", d.action))
+    })?;
+    message.action = d.action.index() as u8;
+    message.level = level.get();
+    message.feedback = feedback as u8;
+    message.probabilities = (0..sequence_game::ACTION_COUNT)
+        .map(|a| if a == d.action.index() { 1.0 } else { 0.0 })
+        .collect();
+    message.explored = false;
+    message.planned_on_belief = true;
+    message.belief_observations = u32::try_from(planned.observations).unwrap_or(u32::MAX);
+    message.belief_success = planned.levels.iter().map(|l| l.success).collect();
+    message.belief_success_sd = planned.levels.iter().map(|l| l.success_sd).collect();
+    message.belief_engagement = planned.levels.iter().map(|l| l.engagement).collect();
+    message.belief_engagement_sd = planned.levels.iter().map(|l| l.engagement_sd).collect();
+    message.baseline_action = d
+        .baseline
+        .map_or(message.baseline_action, |a| a.index() as u8);
+    message.model_used = format!("{} near {}", planned.described, message.model_used);
+    Ok(())
 }
 
 /// Which Q-table made a decision, for the Decision message (the replay reads it back).

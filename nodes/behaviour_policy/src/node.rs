@@ -6,9 +6,12 @@
 //! naming the file) while the others serve. All logic is in
 //! `ClusterPolicies`/`PersistentPolicy`/`PolicyCore`; this only moves messages.
 
+use crate::child_beliefs::{BeliefSettings, ChildBeliefs};
 use crate::learn_first::LearnFirst;
 use crate::{BehaviourPolicyParams, ClusterPolicies};
 use anyhow::Context;
+use child_belief::OwnModelParams;
+use child_belief::prior_file::PriorFile;
 use node_shell::{Bus, ServiceCall};
 use q_learning::training::Pretraining;
 use q_learning::{Learning, QTable};
@@ -46,6 +49,42 @@ fn pretrain(
     Ok((best.q_table, provenance))
 }
 
+/// The per-child beliefs when `child_belief` is on: the rule and the prior covariance file
+/// are checked at start-up (a bad one stops the node, naming it, as any parameter does).
+fn child_beliefs(
+    params: &BehaviourPolicyParams,
+    params_file: &Path,
+    learning: Learning,
+    models: &[UserModelTable],
+) -> anyhow::Result<Option<ChildBeliefs>> {
+    let rule = params
+        .child_belief_rule()
+        .with_context(|| format!("parameter file {}", params_file.display()))?;
+    if !params.child_belief {
+        return Ok(None);
+    }
+    let prior_file = Path::new(&params.child_belief_prior_file);
+    let (file, covariance) = PriorFile::load(prior_file).with_context(|| {
+        format!(
+            "child_belief_prior_file in {} (make one with `policy_lab child-belief-prior`)",
+            params_file.display()
+        )
+    })?;
+    tracing::info!(file = %prior_file.display(), children = file.children,
+        "per-child beliefs on: {}", file.provenance);
+    Ok(Some(ChildBeliefs::new(
+        Path::new(&params.q_table_dir),
+        BeliefSettings {
+            covariance,
+            own_model: OwnModelParams::default(),
+            rule,
+            learning,
+            seed: params.seed(),
+        },
+        models.to_vec(),
+    )))
+}
+
 /// Serves decisions with `params` (read from `params_file`, named in errors) until the node is
 /// asked to stop. The caller holds the lock on `q_table_dir`
 /// (`node_shell::instance_lock`).
@@ -71,7 +110,8 @@ pub async fn run(
         params.default_cluster,
         |k| pretrain(&models[k], learning, &params, pretraining, k),
     )
-    .with_user_tables(params.per_user_q_tables);
+    .with_user_tables(params.per_user_q_tables)
+    .with_child_beliefs(child_beliefs(&params, params_file, learning, &models)?);
     let mut calls = bus.serve(DECIDE_ACTION, |e| DecideActionResponse {
         ok: false,
         error: e.to_string(),

@@ -3,6 +3,7 @@
 //! say the same thing (a test holds them together); the learning constants are checked where
 //! every `Learning` is made (`q_learning::LearningConstants`).
 
+use child_belief::planner::{GuardTest, PlanningRule};
 use q_learning::learning::{Learning, LearningConstants, MAX_EPSILON, Mode, Reward};
 
 /// The behaviour policy node's parameters (each key's meaning at length:
@@ -60,6 +61,17 @@ pub struct BehaviourPolicyParams {
     /// How long a decision request waits for the result it follows (`after_sequence`) before
     /// it is refused, in seconds.
     pub result_wait_s: f64,
+    /// true: each child's decisions are planned on a belief about them (their own model around
+    /// their cluster's, learned from their answers and engagement), near the table that would
+    /// decide for them; kept as belief_<id>.json in q_table_dir.
+    pub child_belief: bool,
+    /// The prior covariance of a child's own model (`policy_lab child-belief-prior`).
+    pub child_belief_prior_file: String,
+    /// The guard: the plan leaves the table only where its advantage over the table, over
+    /// models drawn from the belief, has a mean above this many standard deviations.
+    pub child_belief_caution: f64,
+    /// Models drawn from the belief to judge a deviation from the table.
+    pub child_belief_guard_samples: i64,
 }
 
 impl Default for BehaviourPolicyParams {
@@ -85,6 +97,11 @@ impl Default for BehaviourPolicyParams {
             beta: l.beta,
             lambda: l.lambda,
             result_wait_s: 1.0,
+            child_belief: false,
+            child_belief_prior_file: "nodes/behaviour_policy/models/child_belief_prior_c2.json"
+                .into(),
+            child_belief_caution: 0.5,
+            child_belief_guard_samples: 32,
         }
     }
 }
@@ -181,6 +198,38 @@ impl BehaviourPolicyParams {
             || format!("{} is not in [0, 30] s", self.result_wait_s),
         )?;
         Ok((self.result_wait_s * 1e9).round() as i64)
+    }
+
+    /// The planning rule of `child_belief`, checked (also when it is off, so a bad value is
+    /// found before it is turned on): it plans greedily on the belief, so neither the softmax
+    /// nor ε may explore beside it.
+    pub fn child_belief_rule(&self) -> Result<PlanningRule, ParamError> {
+        let caution = self.child_belief_caution;
+        check(
+            "child_belief_caution",
+            caution.is_finite() && (0.0..=10.0).contains(&caution),
+            || format!("{caution} is not in [0, 10] standard deviations"),
+        )?;
+        let samples = usize::try_from(self.child_belief_guard_samples)
+            .ok()
+            .filter(|n| (2..=1024).contains(n));
+        let samples = samples.ok_or_else(|| ParamError {
+            key: "child_belief_guard_samples",
+            reason: format!("{} is not in [2, 1024]", self.child_belief_guard_samples),
+        })?;
+        check(
+            "child_belief",
+            !self.child_belief || self.mode() == Mode::Exploit,
+            || {
+                "needs exploitation_only: true and exploration_epsilon: 0 (the belief's plan \
+                 decides; the guard bounds its departures from the table)"
+                    .into()
+            },
+        )?;
+        Ok(PlanningRule::Guarded {
+            test: GuardTest::Sigma { caution },
+            samples,
+        })
     }
 
     pub fn pretraining(&self) -> Result<(usize, usize), ParamError> {
@@ -281,6 +330,46 @@ mod tests {
             assert_eq!(e.key, "exploration_epsilon");
             assert!(e.to_string().contains(words), "{e}");
             assert_eq!(p.mode(), Mode::Exploit, "never explores on a refused value");
+        }
+    }
+
+    #[test]
+    fn the_child_belief_is_off_by_default_and_refuses_exploration_beside_it() {
+        let p = BehaviourPolicyParams::default();
+        assert!(!p.child_belief);
+        assert!(p.child_belief_rule().is_ok());
+        let on = |exploitation_only, exploration_epsilon| BehaviourPolicyParams {
+            child_belief: true,
+            exploitation_only,
+            exploration_epsilon,
+            ..Default::default()
+        };
+        assert!(on(true, 0.0).child_belief_rule().is_ok());
+        for p in [on(false, 0.0), on(true, 0.1)] {
+            let e = p.child_belief_rule().expect_err("refused");
+            assert_eq!(e.key, "child_belief");
+            assert!(
+                e.to_string().contains("needs exploitation_only: true"),
+                "{e}"
+            );
+        }
+        for (p, key) in [
+            (
+                BehaviourPolicyParams {
+                    child_belief_caution: f64::NAN,
+                    ..Default::default()
+                },
+                "child_belief_caution",
+            ),
+            (
+                BehaviourPolicyParams {
+                    child_belief_guard_samples: 1,
+                    ..Default::default()
+                },
+                "child_belief_guard_samples",
+            ),
+        ] {
+            assert_eq!(p.child_belief_rule().expect_err(key).key, key);
         }
     }
 }

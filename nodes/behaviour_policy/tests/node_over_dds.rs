@@ -2,7 +2,8 @@
 //! unknown cluster, a cluster whose Q-table file is corrupt, states outside the space, NaN
 //! engagement and a result out of place in its session are refused with a clear error, the
 //! corrupt file is never written, and the node keeps serving the good cluster exactly as the
-//! in-process policy does; with per-user tables it makes and teaches the user's own table. DDS
+//! in-process policy does; with per-user tables it makes and teaches the user's own table;
+//! with child beliefs it keeps each child's belief across a restart. DDS
 //! multicasts, so each runs itself again inside a private loopback-only network namespace
 //! (tests/loopback-netns), where it starts the node. And the learn-first gate (a request held
 //! for the result it follows) through the node's own loop on the in-process bus.
@@ -58,6 +59,26 @@ fn with_per_user_tables_the_node_makes_and_teaches_the_users_own_table_over_dds(
     );
     assert!(
         stdout.contains("over DDS, a second node on the same q_table_dir: refused"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn with_child_beliefs_the_node_keeps_each_childs_belief_across_a_restart_over_dds() {
+    let Some(stdout) = loopback_netns::test_inside_namespace(
+        "with_child_beliefs_the_node_keeps_each_childs_belief_across_a_restart_over_dds",
+        IN_NAMESPACE,
+        Duration::from_secs(180),
+        child_belief_inside_the_namespace,
+    ) else {
+        return;
+    };
+    assert!(
+        stdout.contains(
+            "over DDS, child belief: u1's first decision planned on a new belief, its result \
+             learned into belief_u1.json, and after a restart the next decision planned on it \
+             as the in-process core plans; u2's damaged file named, kept aside, u2 new"
+        ),
         "{stdout}"
     );
 }
@@ -785,5 +806,198 @@ fn per_user_inside_the_namespace() {
     println!(
         "over DDS, per user: user_u1.json made from cluster 0's table at u1's first decision, \
          both learned the result once"
+    );
+}
+
+fn child_belief_inside_the_namespace() {
+    use behaviour_policy::child_beliefs::{BELIEF_FILE, BeliefFile, BeliefSettings, ChildBeliefs};
+    use child_belief::prior_file::PriorFile;
+    use node_shell::{NoParameters, NodeShell};
+    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let prior = root.join("nodes/behaviour_policy/models/child_belief_prior_c2.json");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let q_tables = dir.path().join("q_tables");
+    std::fs::create_dir_all(&q_tables).expect("mkdir");
+    cluster_0_file()
+        .save(&q_tables.join("cluster_0.json"))
+        .expect("writes cluster 0");
+    // u2's belief file cut off mid-way (a crash of another program, a bad copy).
+    let damaged = q_tables.join("belief_u2.json");
+    std::fs::write(
+        &damaged,
+        b"{\"format\": \"qt_therapy child_belief\", \"vers",
+    )
+    .expect("writes");
+    let extra = format!(
+        "    child_belief: true\n    child_belief_prior_file: {:?}\n",
+        prior.to_str().expect("utf-8 path")
+    );
+    let belief_u1 = q_tables.join("belief_u1.json");
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+
+    // First life: u1's first decision, its result learned; u2 is treated as new.
+    let (mut node, probe_params, log) = start_node(dir.path(), &q_tables, &extra);
+    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+    let first = runtime.block_on(async {
+        let (mut shell, NoParameters {}) =
+            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
+                .expect("probe node");
+        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
+        assert!(
+            shell
+                .wait_for_service(&decide, Duration::from_secs(30))
+                .await,
+            "no DecideAction server:\n{}",
+            node_log()
+        );
+        let start = BehaviourState::from_state(State::START);
+        let r = decide
+            .call(request(0, 1, start.clone()), Duration::from_secs(10))
+            .await
+            .expect("answers");
+        assert!(r.ok, "{}", r.error);
+        let d = r.decision;
+        assert!(d.planned_on_belief, "{d:?}");
+        assert_eq!((d.belief_observations, d.belief_success.len()), (0, 3));
+        assert!(
+            d.model_used
+                .starts_with("belief of u1 (0 sequences, prior cluster 0"),
+            "{}",
+            d.model_used
+        );
+        let u2 = DecideActionRequest {
+            user_id: "u2".into(),
+            ..request(0, 1, start)
+        };
+        let r = decide
+            .call(u2, Duration::from_secs(10))
+            .await
+            .expect("answers");
+        assert!(r.ok && r.decision.planned_on_belief, "{r:?}");
+        assert_eq!(r.decision.belief_observations, 0);
+
+        assert!(
+            results
+                .wait_for_subscribers(&shell, Duration::from_secs(30))
+                .await,
+            "the node does not subscribe to {}",
+            SEQUENCE_RESULT.name
+        );
+        assert!(results.send(good_result("good", 0)), "publishes");
+        let learned = wait_for(Duration::from_secs(20), || {
+            BELIEF_FILE
+                .load::<BeliefFile>(&belief_u1)
+                .ok()
+                .filter(|f| f.observations.len() == 1)
+        })
+        .await;
+        assert!(learned.is_some(), "u1's belief file:\n{}", node_log());
+        drop((decide, results));
+        shell.stop().await;
+        d
+    });
+    let status = node.interrupt(Duration::from_secs(20));
+    let text = node_log();
+    assert!(status.success(), "the node exited with {status}:\n{text}");
+    assert!(
+        text.contains("belief file refused") && text.contains(&damaged.display().to_string()),
+        "{text}"
+    );
+    let aside = q_tables.join("belief_u2.json.damaged");
+    assert!(aside.exists(), "the damaged file is kept aside");
+    drop(node);
+
+    // Second life: the same directory; the decision after the result is planned on it.
+    let (mut node, probe_params, log) = start_node(dir.path(), &q_tables, &extra);
+    let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
+    let after = BehaviourState::from_state(State::new(2, 0, 2).expect("state"));
+    let second = runtime.block_on(async {
+        let (mut shell, NoParameters {}) =
+            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
+                .expect("probe node");
+        let decide = shell.client(DECIDE_ACTION).expect("client");
+        assert!(
+            shell
+                .wait_for_service(&decide, Duration::from_secs(30))
+                .await,
+            "no DecideAction server:\n{}",
+            node_log()
+        );
+        let r = decide
+            .call(
+                DecideActionRequest {
+                    after_sequence: 1,
+                    ..request(0, 2, after.clone())
+                },
+                Duration::from_secs(10),
+            )
+            .await
+            .expect("answers");
+        drop(decide);
+        shell.stop().await;
+        r
+    });
+    let status = node.interrupt(Duration::from_secs(20));
+    assert!(
+        status.success(),
+        "the node exited with {status}:\n{}",
+        node_log()
+    );
+    assert!(second.ok, "{}", second.error);
+    let d = second.decision;
+    assert!(d.planned_on_belief && d.belief_observations == 1, "{d:?}");
+    assert_ne!(
+        d.belief_success, first.belief_success,
+        "the result moved it"
+    );
+
+    // The in-process core, taught the same result, plans the same.
+    let (_, covariance) = PriorFile::load(&prior).expect("the prior");
+    let priors = user_models::UserModelSet::load(
+        &root.join("nodes/user_model/models/migrave_study_c2.json"),
+    )
+    .expect("user models")
+    .tables();
+    let params = BehaviourPolicyParams::default();
+    let core_dir = tempfile::tempdir().expect("temp dir");
+    let mut core = ChildBeliefs::new(
+        core_dir.path(),
+        BeliefSettings {
+            covariance,
+            own_model: child_belief::OwnModelParams::default(),
+            rule: params.child_belief_rule().expect("rule"),
+            learning: params.learning().expect("learning"),
+            seed: params.seed(),
+        },
+        priors,
+    );
+    assert!(core.learn(&good_result("good", 0), 0).expect("learns"));
+    // The table the node planned near: cluster 0's, having learned the result.
+    let learned_table = QTableFile::load(&q_tables.join("cluster_0.json"))
+        .expect("cluster 0")
+        .table;
+    let planned = core
+        .decide(
+            "u1",
+            "good",
+            0,
+            &learned_table,
+            after.to_state().expect("state"),
+            2,
+        )
+        .expect("plans");
+    assert_eq!(d.action, planned.decision.action.index() as u8);
+    let success: Vec<f64> = planned.levels.iter().map(|l| l.success).collect();
+    assert_eq!(d.belief_success, success);
+    println!(
+        "over DDS, child belief: u1's first decision planned on a new belief, its result \
+         learned into belief_u1.json, and after a restart the next decision planned on it as \
+         the in-process core plans; u2's damaged file named, kept aside, u2 new"
     );
 }

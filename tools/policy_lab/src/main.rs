@@ -41,6 +41,9 @@ enum Command {
     /// the child's own model), planned on before each sequence, beside `per-child`'s
     /// policies on the same draws.
     PerChildBelief(commands::per_child_belief::Args),
+    /// The prior covariance of a child's own model for the behaviour policy node
+    /// (`child_belief: true`), learned from a study's children against their clusters.
+    ChildBeliefPrior(commands::child_belief_prior::Args),
     /// Supervised autonomy's proposal rules on the study's children, leave one child out:
     /// proposals per session and the score a therapist who knows the child protects, against
     /// the policy alone and proposals at random at the same rate, paired by child.
@@ -57,6 +60,7 @@ fn main() -> anyhow::Result<()> {
         Command::EvaluateInSimulation(a) => commands::evaluate::run_in_simulation(a),
         Command::PerChild(a) => commands::per_child::run(a),
         Command::PerChildBelief(a) => commands::per_child_belief::run(a),
+        Command::ChildBeliefPrior(a) => commands::child_belief_prior::run(a),
         Command::Supervision(a) => commands::supervision::run(a),
     }
 }

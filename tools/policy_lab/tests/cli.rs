@@ -817,3 +817,41 @@ fn per_child_runs_on_the_study_or_says_where_it_looked() {
         assert!(dir.path().join(f).is_file(), "{f}");
     }
 }
+
+#[test]
+fn the_shipped_child_belief_prior_is_what_the_study_gives() {
+    fails(
+        &["child-belief-prior", "--study", "/nonexistent/study"],
+        "/nonexistent/study: no such folder",
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let study = root.join("../shared/data/migrave-study");
+    if !study.is_dir() {
+        eprintln!("skipped: {} is absent", study.display());
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let made = dir.path().join("prior.json");
+    // Run from the repository root, as the README's command, so the provenance is the same.
+    let out = Command::new(env!("CARGO_BIN_EXE_policy_lab"))
+        .current_dir(&root)
+        .args(["child-belief-prior", "--output", path(&made)])
+        .output()
+        .expect("runs");
+    let shown = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{shown}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        shown.contains("20 children (per cluster [11, 9])"),
+        "{shown}"
+    );
+    let shipped = root.join("nodes/behaviour_policy/models/child_belief_prior_c2.json");
+    assert!(
+        std::fs::read(&made).expect("made") == std::fs::read(&shipped).expect("shipped"),
+        "{} is not what `policy_lab child-belief-prior` gives now",
+        shipped.display()
+    );
+}

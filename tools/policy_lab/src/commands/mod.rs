@@ -1,6 +1,7 @@
 //! The subcommands of the `policy_lab` binary, one module each, and what they share:
 //! the learning constants on the command line and loading user models.
 
+pub mod child_belief_prior;
 pub mod child_study;
 pub mod evaluate;
 pub mod experiments;
