@@ -99,6 +99,8 @@ struct DayFigures {
     run_bytes: u64,
     /// Every Q-table file (bytes), after the day.
     q_table_bytes: u64,
+    /// Every child's belief file (bytes), after the day.
+    belief_bytes: u64,
     /// Files under the output directory, after the day.
     files: usize,
     sessions: usize,
@@ -234,9 +236,15 @@ async fn month(
             let table = q_table(out, &own);
             assert_eq!(table["updates"].as_u64(), Some(10 * *n), "{own}: {context}");
             assert_eq!(table["learned"][&id].as_u64(), Some(10), "{own}: {context}");
+            // The child's belief learned the session's ten sequences too.
+            let belief = format!("belief_{}.json", child.user);
+            let observed = q_table(out, &belief)["observations"]
+                .as_array()
+                .map(Vec::len);
+            assert_eq!(observed, Some(10 * *n as usize), "{belief}: {context}");
             let after = q_table_files(out);
             for (name, bytes) in &before {
-                if name != &own && !name.starts_with("cluster_") {
+                if name != &own && name != &belief && !name.starts_with("cluster_") {
                     assert_eq!(after.get(name), Some(bytes), "{name} changed: {context}");
                 }
             }
@@ -285,7 +293,13 @@ async fn month(
             .flat_map(|m| m.message.ids)
             .collect();
         let (run_bytes, _) = disk_use(&run);
-        let (q_table_bytes, _) = disk_use(&out.join("q_tables"));
+        let (q_tables, _) = disk_use(&out.join("q_tables"));
+        let belief_bytes: u64 = q_table_files(out)
+            .iter()
+            .filter(|(name, _)| name.starts_with("belief_"))
+            .map(|(_, bytes)| bytes.len() as u64)
+            .sum();
+        let q_table_bytes = q_tables - belief_bytes;
         let (_, files) = disk_use(out);
         figures.push(DayFigures {
             live_bytes: LIVE_BYTES.load(Ordering::Relaxed),
@@ -293,6 +307,7 @@ async fn month(
             allocations: ALLOCATIONS.load(Ordering::Relaxed) - allocations_before,
             run_bytes,
             q_table_bytes,
+            belief_bytes,
             files,
             sessions: ids.len(),
             persons: persons.len(),
@@ -310,6 +325,11 @@ const RUN_GROWTH: f64 = 1.25;
 /// `learned` entry (the session id and its highest sequence learned); the tables themselves
 /// keep their size. Measured: 61 bytes a session over a month.
 const Q_TABLE_BYTES_PER_SESSION: u64 = 256;
+
+/// What a session adds to its child's belief file, at most (bytes): its ten observed
+/// sequences (the file keeps every sequence of the child's, so the belief can be rebuilt).
+/// Measured: BELIEF_MEASURED bytes a session over a month.
+const BELIEF_BYTES_PER_SESSION: u64 = 4096;
 
 /// Prints the month's figures, a line a day, then the bytes on disk (a session's, the month's)
 /// and checks that memory stays flat and the disk grows by the sessions only: from the second
@@ -374,6 +394,16 @@ fn report(figures: &[DayFigures], took: Duration) {
         "the Q-tables grew from {} to {} bytes over {later} sessions",
         first.q_table_bytes,
         last.q_table_bytes
+    );
+    eprintln!(
+        "children's belief files: {:.1} KB after the month, {:.0} bytes a session",
+        last.belief_bytes as f64 / 1e3,
+        last.belief_bytes as f64 / sessions.max(1) as f64
+    );
+    assert!(
+        last.belief_bytes <= sessions as u64 * BELIEF_BYTES_PER_SESSION,
+        "the belief files hold {} bytes after {sessions} sessions",
+        last.belief_bytes
     );
     if let Some(second) = figures.get(1) {
         let days = (figures.len() - 2) as i64;

@@ -153,6 +153,14 @@ fn decide_response(request: &DecideActionRequest) -> DecideActionResponse {
             explored: false,
             exploitation_only: true,
             model_used: "cluster_0".into(),
+            // As the main job's: planned on the child's belief.
+            planned_on_belief: true,
+            belief_observations: 12,
+            belief_success: vec![0.9, 0.6, 0.3],
+            belief_success_sd: vec![0.05, 0.1, 0.2],
+            belief_engagement: vec![0.4, 0.3, 0.1],
+            belief_engagement_sd: vec![0.1, 0.15, 0.2],
+            baseline_action: 1,
         },
     }
 }

@@ -96,6 +96,8 @@ fn decide(r: &DecideActionRequest, unsure: &[u8]) -> DecideActionResponse {
             explored: r.step.is_multiple_of(2),
             exploitation_only: false,
             model_used: "test peer rule".into(),
+            baseline_action: action,
+            ..Default::default()
         },
     }
 }

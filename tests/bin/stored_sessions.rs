@@ -258,6 +258,8 @@ fn write_session(
                 explored,
                 exploitation_only: false,
                 model_used: "cluster 0 (q_tables/cluster_0.json)".into(),
+                baseline_action: action,
+                ..Default::default()
             };
             b.writer.write(b.decisions, t as u64, &decision)?;
             // Supervised autonomy in every third session: each decision proposed, most
