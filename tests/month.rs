@@ -328,7 +328,7 @@ const Q_TABLE_BYTES_PER_SESSION: u64 = 256;
 
 /// What a session adds to its child's belief file, at most (bytes): its ten observed
 /// sequences (the file keeps every sequence of the child's, so the belief can be rebuilt).
-/// Measured: BELIEF_MEASURED bytes a session over a month.
+/// Measured: 2,086 bytes a session over a month of three children.
 const BELIEF_BYTES_PER_SESSION: u64 = 4096;
 
 /// Prints the month's figures, a line a day, then the bytes on disk (a session's, the month's)
