@@ -267,6 +267,14 @@ pub enum GuardTest {
     /// here, γ^(step − 1) max(0, −A), is at most the session's margin left: `margin` less what
     /// the session's earlier deviations risked (each its loss at that same quantile).
     Chance { margin: f64, risk: f64 },
+    /// Both: the gain must stand out from the doubt about it (`Sigma`'s κ) and the session's
+    /// loss stay within its margin (`Chance`'s constraint). The first asks whether the
+    /// deviation gains, the second bounds what one session may lose if it does not.
+    SigmaChance {
+        caution: f64,
+        margin: f64,
+        risk: f64,
+    },
 }
 
 impl GuardTest {
@@ -282,7 +290,24 @@ impl GuardTest {
                 margin: (margin - spent).max(0.0),
                 risk,
             },
+            GuardTest::SigmaChance {
+                caution,
+                margin,
+                risk,
+            } => Threshold::SigmaChance {
+                caution,
+                margin: (margin - spent).max(0.0),
+                risk,
+            },
         }
+    }
+
+    /// Whether its deviations spend the session's margin.
+    pub fn spends_margin(&self) -> bool {
+        matches!(
+            self,
+            GuardTest::Chance { .. } | GuardTest::SigmaChance { .. }
+        )
     }
 }
 
@@ -293,6 +318,12 @@ pub enum Threshold {
     Sigma(f64),
     /// mean(A) > 0 and the loss at the (1 − risk) quantile at most `margin`.
     Chance { margin: f64, risk: f64 },
+    /// mean(A) > κ sd(A) and the loss at the (1 − risk) quantile at most `margin`.
+    SigmaChance {
+        caution: f64,
+        margin: f64,
+        risk: f64,
+    },
 }
 
 /// What the guard found before leaving the baseline: the plan's advantage over the baseline
@@ -367,6 +398,17 @@ pub fn guarded_action(
             let risked = at_quantile(1.0 - risk);
             (
                 !advantages.is_empty() && mean > 0.0 && risked <= margin,
+                risked,
+            )
+        }
+        Threshold::SigmaChance {
+            caution,
+            margin,
+            risk,
+        } => {
+            let risked = at_quantile(1.0 - risk);
+            (
+                !advantages.is_empty() && mean > caution * sd && risked <= margin,
                 risked,
             )
         }
@@ -550,7 +592,7 @@ impl<B: Belief> BeliefPolicy<B> {
                 guarded_action(&p, b, &models, &self.learning, state, step, threshold, u);
             if let Some(g) = &guard
                 && g.deviated
-                && matches!(test, GuardTest::Chance { .. })
+                && test.spends_margin()
             {
                 self.session_risked += g.risked_loss;
             }

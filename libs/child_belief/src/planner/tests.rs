@@ -287,6 +287,53 @@ fn the_chance_guard_leaves_the_baseline_only_where_the_sessions_loss_stays_withi
     );
 }
 
+#[test]
+fn the_sigma_and_chance_guard_leaves_the_baseline_only_where_both_tests_pass() {
+    let l = learning();
+    let baseline = Baseline::of_table(&level_one_table());
+    let good = model(0.0);
+    let bad = failing_above_level_one();
+    let p = plan(&good, &l, None, 0.0, 1);
+    let planned = p.action(State::START, 1);
+    let level_one = Action::SetLevel(Level::ONE);
+    let models = [good.clone(), good.clone(), bad.clone()];
+    let guard =
+        |threshold| guarded_action(&p, &baseline, &models, &l, State::START, 1, threshold, 0.5).0;
+    let loss = {
+        let planned = CompiledPolicy::new(1, |s, k| p.action(s, k));
+        let base = CompiledPolicy::new(1, |s, k| baseline.action(s, k, 0.0));
+        base.value(&bad, &l, State::START) - planned.value(&bad, &l, State::START)
+    };
+    // The mean gain alone passes (κ 0), and so does the loss within a margin as large.
+    assert_eq!(guard(Threshold::Sigma(0.0)), planned);
+    let both = |caution, margin| Threshold::SigmaChance {
+        caution,
+        margin,
+        risk: 0.1,
+    };
+    assert_eq!(guard(both(0.0, loss + 1e-9)), planned);
+    // Either failing keeps the baseline: the loss past the margin, or the gain under κ σ.
+    assert_eq!(guard(both(0.0, loss - 1e-3)), level_one);
+    assert_eq!(guard(Threshold::Sigma(1.0)), level_one);
+    assert_eq!(guard(both(1.0, 100.0)), level_one);
+    // It spends the session's margin as the chance guard does; the σ tests spend none.
+    let test = GuardTest::SigmaChance {
+        caution: 0.5,
+        margin: 1.0,
+        risk: 0.1,
+    };
+    assert!(test.spends_margin());
+    assert!(!GuardTest::Sigma { caution: 0.5 }.spends_margin());
+    assert_eq!(
+        test.threshold(50, 0.75),
+        Threshold::SigmaChance {
+            caution: 0.5,
+            margin: 0.25,
+            risk: 0.1
+        }
+    );
+}
+
 /// A belief that is a known list of models: its draws go round the list, its predictive model
 /// is the first, and it counts the sequences seen at each input.
 struct Known {

@@ -64,10 +64,17 @@ pub enum Planning {
     /// and in all but `BeliefSpec::chance_risk` of the drawn models the session loses at most
     /// what is left of `BeliefSpec::chance_margin` against the baseline.
     Chance,
+    /// Both `Guarded`'s test and `Chance`'s constraint: the gain must stand out by `caution`
+    /// standard deviations and the session's loss stay within `chance_margin`.
+    SigmaChance,
     /// SPIBB: the posterior-mean plan, leaving the baseline only between inputs the child
     /// was seen at `BeliefSpec::spibb_min_observations` times.
     Spibb,
 }
+
+/// The planning the study chose (with `BeliefSpec::default()`'s numbers): what
+/// `policy_lab per-child-belief` runs by default and the live policy is given.
+pub const DEFAULT_PLANNING: Planning = Planning::Chance;
 
 /// What the belief starts from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -103,6 +110,7 @@ impl BeliefArm {
                 Planning::Guarded => "guarded",
                 Planning::Fading => "fading guard",
                 Planning::Chance => "chance guard",
+                Planning::SigmaChance => "σ and chance guard",
                 Planning::Spibb => "SPIBB",
             },
             match self.start {
@@ -155,10 +163,10 @@ impl Default for BeliefSpec {
             own_model: OwnModelParams::default(),
             shrinkage: 0.5,
             variance_floor: 0.01,
-            covariance_scale: 1.0,
+            covariance_scale: 2.0,
             caution: 0.5,
             baseline_sessions: 0,
-            guard_samples: 32,
+            guard_samples: 64,
             fading_half: 50.0,
             chance_margin: 0.5,
             chance_risk: 0.1,
@@ -345,6 +353,48 @@ pub fn baseline_table(
     }
 }
 
+/// The planner's rule of `planning` with `spec`'s numbers (what the live policy is given).
+pub fn planning_rule(planning: Planning, spec: &BeliefSpec) -> PlanningRule {
+    match planning {
+        Planning::Mean => PlanningRule::Mean,
+        Planning::Sampling => PlanningRule::Sampling,
+        Planning::Cautious => PlanningRule::Cautious {
+            caution: spec.caution,
+        },
+        Planning::Guarded => PlanningRule::Guarded {
+            test: GuardTest::Sigma {
+                caution: spec.caution,
+            },
+            samples: spec.guard_samples,
+        },
+        Planning::Fading => PlanningRule::Guarded {
+            test: GuardTest::Fading {
+                caution: spec.caution,
+                half: spec.fading_half,
+            },
+            samples: spec.guard_samples,
+        },
+        Planning::Chance => PlanningRule::Guarded {
+            test: GuardTest::Chance {
+                margin: spec.chance_margin,
+                risk: spec.chance_risk,
+            },
+            samples: spec.guard_samples,
+        },
+        Planning::SigmaChance => PlanningRule::Guarded {
+            test: GuardTest::SigmaChance {
+                caution: spec.caution,
+                margin: spec.chance_margin,
+                risk: spec.chance_risk,
+            },
+            samples: spec.guard_samples,
+        },
+        Planning::Spibb => PlanningRule::Spibb {
+            min_observations: spec.spibb_min_observations,
+        },
+    }
+}
+
 /// `spec.sessions` sessions of one seed of a belief arm against the child's own model, on the
 /// same draws as `per_child`'s policies.
 pub fn run_belief_seed(
@@ -358,36 +408,7 @@ pub fn run_belief_seed(
 ) -> Result<SessionRun, BeliefError> {
     let child = &cases[index].case.child_model;
     let learning = &spec.learning;
-    let rule = match arm.planning {
-        Planning::Mean => PlanningRule::Mean,
-        Planning::Sampling => PlanningRule::Sampling,
-        Planning::Cautious => PlanningRule::Cautious {
-            caution: belief_spec.caution,
-        },
-        Planning::Guarded => PlanningRule::Guarded {
-            test: GuardTest::Sigma {
-                caution: belief_spec.caution,
-            },
-            samples: belief_spec.guard_samples,
-        },
-        Planning::Fading => PlanningRule::Guarded {
-            test: GuardTest::Fading {
-                caution: belief_spec.caution,
-                half: belief_spec.fading_half,
-            },
-            samples: belief_spec.guard_samples,
-        },
-        Planning::Chance => PlanningRule::Guarded {
-            test: GuardTest::Chance {
-                margin: belief_spec.chance_margin,
-                risk: belief_spec.chance_risk,
-            },
-            samples: belief_spec.guard_samples,
-        },
-        Planning::Spibb => PlanningRule::Spibb {
-            min_observations: belief_spec.spibb_min_observations,
-        },
-    };
+    let rule = planning_rule(arm.planning, belief_spec);
     let mut policy = BeliefPolicy::new(
         initial_belief(cases, index, arm, belief_spec)?,
         baseline.cloned(),

@@ -31,12 +31,14 @@ pub struct Args {
     reward: Reward,
     #[command(flatten)]
     learning: LearningArgs,
-    /// The belief arms: library or own (model), mean or sampling, cluster or population,
-    /// e.g. library-mean-cluster.
+    /// The belief arms: REPRESENTATION-PLANNING-START, the representation library, own or
+    /// learned (own model, learned covariance), the planning mean, sampling, cautious,
+    /// guarded, fading, chance, bounded or spibb, the start cluster or population, e.g.
+    /// library-mean-cluster. By default the chosen rule from both starts.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "library-mean-cluster,library-mean-population,library-sampling-cluster,own-mean-cluster,own-mean-population,own-sampling-cluster"
+        default_value = "learned-chance-cluster,learned-chance-population"
     )]
     arms: Vec<String>,
     /// Library: σ of an observed engagement around a known model's prediction.
@@ -95,7 +97,7 @@ pub struct Args {
     #[arg(long, default_value_t = BeliefSpec::default().covariance_scale)]
     covariance_scale: f64,
     /// Sessions the baseline plays alone at the start while the belief watches.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = BeliefSpec::default().baseline_sessions)]
     baseline_sessions: usize,
     /// Guarded planning: models drawn from the belief to judge a deviation.
     #[arg(long, default_value_t = BeliefSpec::default().guard_samples)]
@@ -142,9 +144,11 @@ fn parse_arm(s: &str) -> anyhow::Result<BeliefArm> {
             "guarded" => Planning::Guarded,
             "fading" => Planning::Fading,
             "chance" => Planning::Chance,
+            "bounded" => Planning::SigmaChance,
             "spibb" => Planning::Spibb,
             _ => anyhow::bail!(
-                "arm {s:?}: planning is mean, sampling, cautious, guarded, fading, chance or spibb"
+                "arm {s:?}: planning is mean, sampling, cautious, guarded, fading, chance, bounded \
+                 (σ and chance) or spibb"
             ),
         },
         start: match *st {
@@ -671,6 +675,41 @@ mod tests {
         // 4 children x (cluster, optimum, per-user, 2 arms) x 3 seeds x 6 sessions.
         assert_eq!(a.files[0].1.lines().count(), 1 + 4 * 5 * 3 * 6);
         assert!(parse_arm("library-mean").is_err());
+        assert!(parse_arm("learned-bounded-population").is_ok());
         assert!(parse_arm("own-greedy-cluster").is_err());
+    }
+
+    #[test]
+    fn the_default_arms_are_the_chosen_rule_from_the_cluster_and_from_the_population() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: Args,
+        }
+        let cli = <Cli as clap::Parser>::try_parse_from(["per-child-belief"]).expect("defaults");
+        let arms: Vec<BeliefArm> = cli
+            .args
+            .arms
+            .iter()
+            .map(|a| parse_arm(a).expect("an arm"))
+            .collect();
+        let chosen = |start| BeliefArm {
+            representation: Representation::OwnModelLearned,
+            planning: policy_lab::child_study::per_child_belief::DEFAULT_PLANNING,
+            start,
+        };
+        assert_eq!(arms, [chosen(Start::Cluster), chosen(Start::Population)]);
+        // The flags' defaults are the study's.
+        assert_eq!(cli.args.guard_samples, BeliefSpec::default().guard_samples);
+        assert_eq!(cli.args.chance_margin, BeliefSpec::default().chance_margin);
+        assert_eq!(cli.args.chance_risk, BeliefSpec::default().chance_risk);
+        assert_eq!(
+            cli.args.covariance_scale,
+            BeliefSpec::default().covariance_scale
+        );
+        assert_eq!(
+            cli.args.baseline_sessions,
+            BeliefSpec::default().baseline_sessions
+        );
     }
 }
