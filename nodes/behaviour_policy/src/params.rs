@@ -68,8 +68,12 @@ pub struct BehaviourPolicyParams {
     /// The prior covariance of a child's own model (`policy_lab child-belief-prior`).
     pub child_belief_prior_file: String,
     /// The guard: the plan leaves the table only where its advantage over the table, over
-    /// models drawn from the belief, has a mean above this many standard deviations.
-    pub child_belief_caution: f64,
+    /// models drawn from the belief, is positive on average and, in all but a share
+    /// `child_belief_risk` of them, loses at most what is left of this much of the session's
+    /// return against the table.
+    pub child_belief_margin: f64,
+    /// The share of drawn models allowed past the margin.
+    pub child_belief_risk: f64,
     /// Models drawn from the belief to judge a deviation from the table.
     pub child_belief_guard_samples: i64,
 }
@@ -100,8 +104,9 @@ impl Default for BehaviourPolicyParams {
             child_belief: false,
             child_belief_prior_file: "nodes/behaviour_policy/models/child_belief_prior_c2.json"
                 .into(),
-            child_belief_caution: 0.5,
-            child_belief_guard_samples: 32,
+            child_belief_margin: 0.5,
+            child_belief_risk: 0.1,
+            child_belief_guard_samples: 64,
         }
     }
 }
@@ -204,11 +209,16 @@ impl BehaviourPolicyParams {
     /// found before it is turned on): it plans greedily on the belief, so neither the softmax
     /// nor ε may explore beside it.
     pub fn child_belief_rule(&self) -> Result<PlanningRule, ParamError> {
-        let caution = self.child_belief_caution;
+        let (margin, risk) = (self.child_belief_margin, self.child_belief_risk);
         check(
-            "child_belief_caution",
-            caution.is_finite() && (0.0..=10.0).contains(&caution),
-            || format!("{caution} is not in [0, 10] standard deviations"),
+            "child_belief_margin",
+            margin.is_finite() && (0.0..=100.0).contains(&margin),
+            || format!("{margin} is not in [0, 100] (the session's return)"),
+        )?;
+        check(
+            "child_belief_risk",
+            risk.is_finite() && (0.0..1.0).contains(&risk),
+            || format!("{risk} is not in [0, 1)"),
         )?;
         let samples = usize::try_from(self.child_belief_guard_samples)
             .ok()
@@ -227,7 +237,7 @@ impl BehaviourPolicyParams {
             },
         )?;
         Ok(PlanningRule::Guarded {
-            test: GuardTest::Sigma { caution },
+            test: GuardTest::Chance { margin, risk },
             samples,
         })
     }
@@ -356,10 +366,17 @@ mod tests {
         for (p, key) in [
             (
                 BehaviourPolicyParams {
-                    child_belief_caution: f64::NAN,
+                    child_belief_margin: f64::NAN,
                     ..Default::default()
                 },
-                "child_belief_caution",
+                "child_belief_margin",
+            ),
+            (
+                BehaviourPolicyParams {
+                    child_belief_risk: 1.0,
+                    ..Default::default()
+                },
+                "child_belief_risk",
             ),
             (
                 BehaviourPolicyParams {

@@ -36,22 +36,34 @@ fn covariance(priors: &[UserModelTable]) -> LearnedCovariance {
         .expect("learned")
 }
 
-fn settings(priors: &[UserModelTable], caution: f64) -> BeliefSettings {
+fn settings(priors: &[UserModelTable], rule: PlanningRule) -> BeliefSettings {
     BeliefSettings {
         covariance: covariance(priors),
         own_model: OwnModelParams::default(),
-        rule: PlanningRule::Guarded {
-            test: GuardTest::Sigma { caution },
-            samples: 32,
-        },
+        rule,
         learning: Learning::default(),
         seed: 7,
     }
 }
 
-fn beliefs(dir: &Path, caution: f64) -> ChildBeliefs {
+/// The node's rule, as `params/behaviour_policy.yaml` sets it.
+fn chosen() -> PlanningRule {
+    crate::BehaviourPolicyParams::default()
+        .child_belief_rule()
+        .expect("the default rule")
+}
+
+/// The σ guard at `caution`: its contract is simple to check.
+fn sigma(caution: f64) -> PlanningRule {
+    PlanningRule::Guarded {
+        test: GuardTest::Sigma { caution },
+        samples: 32,
+    }
+}
+
+fn beliefs(dir: &Path, rule: PlanningRule) -> ChildBeliefs {
     let p = priors();
-    ChildBeliefs::new(dir, settings(&p, caution), p)
+    ChildBeliefs::new(dir, settings(&p, rule), p)
 }
 
 /// A table preferring level 1 everywhere, feedback never.
@@ -106,7 +118,7 @@ fn play_at(
 #[test]
 fn right_answers_at_level_3_raise_the_belief_there_and_wrong_ones_lower_it() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mut b = beliefs(dir.path(), 0.5);
+    let mut b = beliefs(dir.path(), chosen());
     let before = b
         .decide("u1", "s1", 0, &table(), State::START, 1)
         .expect("decides");
@@ -125,7 +137,7 @@ fn right_answers_at_level_3_raise_the_belief_there_and_wrong_ones_lower_it() {
     assert!(after.levels[2].success_sd < before.levels[2].success_sd);
 
     // Level 1, where the cluster expects 94 % right: six wrong answers there.
-    let mut wrong = beliefs(tempfile::tempdir().expect("tempdir").path(), 0.5);
+    let mut wrong = beliefs(tempfile::tempdir().expect("tempdir").path(), chosen());
     play_at(&mut wrong, "s1", 1, 6, |_| false);
     let failed = wrong
         .decide("u1", "s1", 0, &table(), State::new(1, 0, -1).expect("s"), 7)
@@ -143,7 +155,7 @@ fn right_answers_at_level_3_raise_the_belief_there_and_wrong_ones_lower_it() {
 fn the_belief_file_brings_the_same_belief_back_after_a_restart() {
     let dir = tempfile::tempdir().expect("tempdir");
     let state = {
-        let mut b = beliefs(dir.path(), 0.5);
+        let mut b = beliefs(dir.path(), chosen());
         play(&mut b, "s1", 5, |i| i % 2 == 1)
     };
     let path = dir.path().join("belief_u1.json");
@@ -152,14 +164,14 @@ fn the_belief_file_brings_the_same_belief_back_after_a_restart() {
     assert_eq!(file.prior_cluster, 0);
 
     // Two nodes started on the file: the same belief, the same decision.
-    let mut a = beliefs(dir.path(), 0.5);
-    let mut c = beliefs(dir.path(), 0.5);
+    let mut a = beliefs(dir.path(), chosen());
+    let mut c = beliefs(dir.path(), chosen());
     let da = a.decide("u1", "s2", 0, &table(), state, 2).expect("a");
     let dc = c.decide("u1", "s2", 0, &table(), state, 2).expect("c");
     assert_eq!(da, dc);
     assert_eq!(da.observations, 5);
     // And the one that never stopped.
-    let mut live = beliefs(tempfile::tempdir().expect("tempdir").path(), 0.5);
+    let mut live = beliefs(tempfile::tempdir().expect("tempdir").path(), chosen());
     play(&mut live, "s1", 5, |i| i % 2 == 1);
     let dl = live
         .decide("u1", "s2", 0, &table(), state, 2)
@@ -171,7 +183,7 @@ fn the_belief_file_brings_the_same_belief_back_after_a_restart() {
 #[test]
 fn a_result_sent_again_is_learned_once_and_a_later_cluster_keeps_the_first_prior() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mut b = beliefs(dir.path(), 0.5);
+    let mut b = beliefs(dir.path(), chosen());
     let r = result("s1", 1, State::START, 2, true);
     assert!(b.learn(&r, 0).expect("learns"));
     let bytes = std::fs::read(dir.path().join("belief_u1.json")).expect("file");
@@ -190,13 +202,13 @@ fn a_result_sent_again_is_learned_once_and_a_later_cluster_keeps_the_first_prior
 fn a_damaged_belief_file_is_named_kept_aside_and_the_child_starts_anew() {
     let dir = tempfile::tempdir().expect("tempdir");
     {
-        let mut b = beliefs(dir.path(), 0.5);
+        let mut b = beliefs(dir.path(), chosen());
         play(&mut b, "s1", 3, |_| true);
     }
     let path = dir.path().join("belief_u1.json");
     let whole = std::fs::read(&path).expect("file");
     std::fs::write(&path, &whole[..whole.len() / 2]).expect("cut");
-    let mut b = beliefs(dir.path(), 0.5);
+    let mut b = beliefs(dir.path(), chosen());
     let d = b
         .decide("u1", "s2", 0, &table(), State::START, 1)
         .expect("decides as for a new child");
@@ -221,7 +233,7 @@ fn a_damaged_belief_file_is_named_kept_aside_and_the_child_starts_anew() {
     let mut other = file.clone();
     other.user_id = "u2".into();
     BELIEF_FILE.save(&path, &other).expect("writes");
-    let mut b = beliefs(dir.path(), 0.5);
+    let mut b = beliefs(dir.path(), chosen());
     assert_eq!(
         b.decide("u1", "s3", 0, &table(), State::START, 1)
             .expect("new")
@@ -234,7 +246,7 @@ fn a_damaged_belief_file_is_named_kept_aside_and_the_child_starts_anew() {
 #[test]
 fn a_result_that_is_no_sequence_is_refused_and_nothing_is_written() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mut b = beliefs(dir.path(), 0.5);
+    let mut b = beliefs(dir.path(), chosen());
     let mut r = result("s1", 1, State::START, 2, true);
     r.level = 4;
     let e = b.learn(&r, 0).expect_err("level 4").to_string();
@@ -246,11 +258,12 @@ fn a_result_that_is_no_sequence_is_refused_and_nothing_is_written() {
 }
 
 #[test]
-fn decisions_keep_to_the_mask_and_the_guard_lets_only_clear_gains_leave_the_table() {
+fn decisions_keep_to_the_mask_and_the_guards_let_only_clear_gains_leave_the_table() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mut bold = beliefs(dir.path(), 0.0);
-    let mut careful = beliefs(tempfile::tempdir().expect("tempdir").path(), 10.0);
-    for b in [&mut bold, &mut careful] {
+    let mut bold = beliefs(dir.path(), sigma(0.0));
+    let mut careful = beliefs(tempfile::tempdir().expect("tempdir").path(), sigma(10.0));
+    let mut chance = beliefs(tempfile::tempdir().expect("tempdir").path(), chosen());
+    for b in [&mut bold, &mut careful, &mut chance] {
         play(b, "s1", 8, |i| i != 4);
     }
     let (mut left, mut careful_left) = (0, 0);
@@ -284,6 +297,17 @@ fn decisions_keep_to_the_mask_and_the_guard_lets_only_clear_gains_leave_the_tabl
                 .is_some_and(|g| g.deviated && g.advantage > 10.0 * g.advantage_sd);
             assert!(kept || cleared, "{state} step {step}: {:?}", c.decision);
             careful_left += usize::from(!kept);
+            // The node's chance guard: a gain on average, and a loss past the session's margin
+            // (0.5) in at most a tenth of the drawn models.
+            let d = chance
+                .decide("u1", &session, 0, &table(), state, step)
+                .expect("decides");
+            let kept = Some(d.decision.action) == d.decision.baseline;
+            let within = d
+                .decision
+                .guard
+                .is_some_and(|g| g.deviated && g.advantage > 0.0 && g.risked_loss <= 0.5);
+            assert!(kept || within, "{state} step {step}: {:?}", d.decision);
         }
     }
     assert!(left > 0, "with no caution the plan never left the table");
@@ -294,7 +318,7 @@ fn decisions_keep_to_the_mask_and_the_guard_lets_only_clear_gains_leave_the_tabl
 fn the_same_seed_and_sequences_give_the_same_decisions() {
     let run = || {
         let dir = tempfile::tempdir().expect("tempdir");
-        let mut b = beliefs(dir.path(), 0.5);
+        let mut b = beliefs(dir.path(), chosen());
         let mut out = Vec::new();
         let mut state = State::START;
         for i in 1..=10u8 {

@@ -26,9 +26,9 @@ pub struct Args {
     /// The least variance of any input.
     #[arg(long, default_value_t = BeliefSpec::default().variance_floor)]
     variance_floor: f64,
-    /// The covariance is multiplied by this. 1 is the shipped file's; the study's chosen rule
-    /// doubles it (`BeliefSpec::default().covariance_scale`), for the node with that rule.
-    #[arg(long, default_value_t = 1.0)]
+    /// The covariance is multiplied by this (the study's chosen rule doubles it: a child may
+    /// lie further from their cluster than the known children did).
+    #[arg(long, default_value_t = BeliefSpec::default().covariance_scale)]
     scale: f64,
     /// Seed of the children's own fits (as `per-child`'s --seed).
     #[arg(long, default_value_t = 7)]
