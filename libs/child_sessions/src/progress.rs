@@ -14,6 +14,7 @@ use crate::find::{FileKind, walk};
 use crate::sessions::read_sessions;
 use crate::user::UserId;
 use bag_file::BagReader;
+use qt_therapy_msgs::validate::Validate;
 use qt_therapy_msgs::{ActionProposal, Decision, ProposalStatus, SequenceResult};
 use serde::Deserialize;
 use session_log::{Arrival, Messages, Once};
@@ -116,21 +117,112 @@ impl SessionProgress {
     }
 }
 
-/// What the robot believes about the child now: per level P(success) and engagement with
-/// their uncertainty, or weights over known models. The policy's decisions
-/// (`msgs/msg/Decision.msg`) do not carry a belief yet, so it is [`Belief::NotCarried`];
-/// once they do, [`Belief::of`] reads it from the child's last decision and the report's
-/// "What the robot believes now" shows it.
+/// The belief about the child at one level, as a decision carried it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LevelBelief {
+    /// The chance of a right answer without feedback, and its posterior standard deviation.
+    pub success: f64,
+    pub success_sd: f64,
+    /// The engagement expected there (−1..1), and its posterior standard deviation.
+    pub engagement: f64,
+    pub engagement_sd: f64,
+}
+
+/// The belief one decision was planned on: levels 1..3 (index 0..2), after `observations`
+/// sequences of the child's own.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BeliefAt {
+    pub observations: u32,
+    pub levels: [LevelBelief; 3],
+}
+
+impl BeliefAt {
+    /// The belief `d` was planned on; None when it was not planned on one, or carries one
+    /// that is not valid (`Decision::validate`: three levels, each in range).
+    fn of(d: &Decision) -> Option<BeliefAt> {
+        if !d.planned_on_belief || d.validate().is_err() {
+            return None;
+        }
+        let level = |k: usize| {
+            Some(LevelBelief {
+                success: *d.belief_success.get(k)?,
+                success_sd: *d.belief_success_sd.get(k)?,
+                engagement: *d.belief_engagement.get(k)?,
+                engagement_sd: *d.belief_engagement_sd.get(k)?,
+            })
+        };
+        Some(BeliefAt {
+            observations: d.belief_observations,
+            levels: [level(0)?, level(1)?, level(2)?],
+        })
+    }
+}
+
+/// What the robot believes about the child, from the last session whose decisions were
+/// planned on a belief: where it stood then (its last such decision) and where it stood at
+/// that session's start (its first), and how often that session the plan left the group's
+/// table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarriedBelief {
+    /// The session, and its place among the child's sessions (1-based, oldest first).
+    pub session_id: String,
+    pub session_number: usize,
+    pub now: BeliefAt,
+    pub session_start: BeliefAt,
+    /// That session's decisions planned on the belief, and those whose action differs from
+    /// the one the cluster's Q-table would have taken (`baseline_action`).
+    pub planned: usize,
+    pub left_table: usize,
+}
+
+/// What the robot believes about the child now (per level P(success) and engagement with
+/// their uncertainty), read from the policy's decisions (`msgs/msg/Decision.msg`) by
+/// [`Belief::of`]; the report's "What the robot believes now" shows it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Belief {
-    /// Decisions carry no belief about the child: not available.
+    /// No decision of the policy was read for the child (no session, or no readable bag).
+    NoDecisions,
+    /// Decisions were read and none carries a belief: the policy decided from the group's
+    /// (the cluster's) Q-table (its `child_belief` parameter off).
     NotCarried,
+    /// Boxed: a belief is some 300 bytes, the other variants none.
+    Carried(Box<CarriedBelief>),
 }
 
 impl Belief {
-    /// The belief the child's last decision carries.
-    pub fn of(_last_decision: Option<&Decision>) -> Belief {
-        Belief::NotCarried
+    /// The belief the child's decisions carry: `sessions` holds each session's id and
+    /// decisions, oldest session first, each session's decisions in the order they were made.
+    /// The last session with a decision planned on a (valid) belief is read.
+    pub fn of(sessions: &[(String, Vec<Decision>)]) -> Belief {
+        if sessions.iter().all(|(_, d)| d.is_empty()) {
+            return Belief::NoDecisions;
+        }
+        let Some((number, (session_id, decisions))) = sessions
+            .iter()
+            .enumerate()
+            .rev()
+            .find(|(_, (_, d))| d.iter().any(|d| BeliefAt::of(d).is_some()))
+        else {
+            return Belief::NotCarried;
+        };
+        let planned: Vec<(&Decision, BeliefAt)> = decisions
+            .iter()
+            .filter_map(|d| Some((d, BeliefAt::of(d)?)))
+            .collect();
+        let (Some((_, session_start)), Some((_, now))) = (planned.first(), planned.last()) else {
+            return Belief::NotCarried;
+        };
+        Belief::Carried(Box::new(CarriedBelief {
+            session_id: session_id.clone(),
+            session_number: number + 1,
+            now: now.clone(),
+            session_start: session_start.clone(),
+            planned: planned.len(),
+            left_table: planned
+                .iter()
+                .filter(|(d, _)| d.baseline_action != d.action)
+                .count(),
+        }))
     }
 }
 
@@ -322,19 +414,37 @@ impl Progress {
                 read_bag(bag, dir, user, &mut gathered, &mut rule, &mut problems);
             }
         }
-        let mut counted: Vec<(SessionProgress, Option<Decision>)> =
+        let mut counted: Vec<(SessionProgress, Vec<Decision>)> =
             gathered.into_iter().map(|(id, g)| counted(id, g)).collect();
         counted.sort_by(|(a, _), (b, _)| {
             a.started_ns
                 .cmp(&b.started_ns)
                 .then(a.session_id.cmp(&b.session_id))
         });
-        let last_decision = counted.iter().rev().find_map(|(_, d)| d.clone());
-        let sessions = counted.into_iter().map(|(s, _)| s).collect();
+        let last_decision = counted.iter().rev().find_map(|(_, d)| d.last().cloned());
+        // A belief that is not valid (a bag from a policy that wrote it wrong) is named and
+        // not shown.
+        for (s, decisions) in &counted {
+            for d in decisions.iter().filter(|d| d.planned_on_belief) {
+                if let Err(e) = d.validate() {
+                    problems.push(format!(
+                        "session {}, decision for sequence {}: {e}; its belief is not shown",
+                        s.session_id, d.step
+                    ));
+                }
+            }
+        }
+        let (sessions, decisions): (Vec<SessionProgress>, Vec<(String, Vec<Decision>)>) = counted
+            .into_iter()
+            .map(|(s, d)| {
+                let id = s.session_id.clone();
+                (s, (id, d))
+            })
+            .unzip();
         Ok(Progress {
             user: user.clone(),
             places: places.to_vec(),
-            belief: Belief::of(last_decision.as_ref()),
+            belief: Belief::of(&decisions),
             sessions,
             problems,
             last_decision,
@@ -528,8 +638,9 @@ fn counted_proposals(messages: &[ActionProposal]) -> ProposalCounts {
     c
 }
 
-/// The session counted, and its last decision (the newest stamp).
-fn counted(session_id: String, mut g: Gathered) -> (SessionProgress, Option<Decision>) {
+/// The session counted, and its decisions in the order they were made (by sequence, then
+/// stamp).
+fn counted(session_id: String, mut g: Gathered) -> (SessionProgress, Vec<Decision>) {
     g.results.sort_by_key(|r| r.sequence_index);
     let started_ns = g.started_ns.or_else(|| {
         g.results
@@ -544,12 +655,8 @@ fn counted(session_id: String, mut g: Gathered) -> (SessionProgress, Option<Deci
         .decisions
         .as_ref()
         .map(|d| d.iter().filter(|d| d.explored).count());
-    let last_decision = g
-        .decisions
-        .iter()
-        .flatten()
-        .max_by_key(|d| (d.step, d.header.stamp.to_nanos()))
-        .cloned();
+    let mut decisions = g.decisions.clone().unwrap_or_default();
+    decisions.sort_by_key(|d| (d.step, d.header.stamp.to_nanos()));
     let session = SessionProgress {
         tally: Tally::of(&g.results),
         encouraging: g.results.iter().filter(|r| r.feedback == 1).count(),
@@ -573,5 +680,100 @@ fn counted(session_id: String, mut g: Gathered) -> (SessionProgress, Option<Deci
         recovered: g.recovered,
         results: g.results,
     };
-    (session, last_decision)
+    (session, decisions)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A decision of sequence `step`, planned on a belief of `right` (P(right) per level) after
+    /// `observations` sequences when given, the table's action `baseline`.
+    fn decision(step: u8, action: u8, baseline: u8, belief: Option<([f64; 3], u32)>) -> Decision {
+        let mut d = Decision {
+            session_id: "s".into(),
+            step,
+            action,
+            level: 1,
+            q_values: vec![0.0; 5],
+            probabilities: vec![0.2; 5],
+            baseline_action: baseline,
+            ..Default::default()
+        };
+        if let Some((right, observations)) = belief {
+            d.planned_on_belief = true;
+            d.belief_observations = observations;
+            d.belief_success = right.to_vec();
+            d.belief_success_sd = vec![0.06, 0.1, 0.15];
+            d.belief_engagement = vec![0.4, 0.2, -0.1];
+            d.belief_engagement_sd = vec![0.1, 0.12, 0.2];
+        }
+        d
+    }
+
+    fn session(id: &str, decisions: Vec<Decision>) -> (String, Vec<Decision>) {
+        (id.into(), decisions)
+    }
+
+    #[test]
+    fn decisions_without_a_belief_say_the_group_table_decided() {
+        assert_eq!(Belief::of(&[]), Belief::NoDecisions);
+        assert_eq!(Belief::of(&[session("a", Vec::new())]), Belief::NoDecisions);
+        let table = |step| decision(step, 1, 1, None);
+        assert_eq!(
+            Belief::of(&[session("a", vec![table(1), table(2)]), session("b", vec![])]),
+            Belief::NotCarried
+        );
+    }
+
+    #[test]
+    fn the_belief_now_and_at_the_start_of_the_last_session_planned_on_it() {
+        let sessions = [
+            // An older session planned on a belief: not the one read.
+            session("a", vec![decision(1, 0, 0, Some(([0.5, 0.5, 0.5], 0)))]),
+            session(
+                "b",
+                vec![
+                    decision(1, 0, 0, Some(([0.8, 0.55, 0.3], 20))),
+                    decision(2, 1, 0, Some(([0.82, 0.6, 0.3], 21))),
+                    // One the table alone decided (the plan did not run): not counted.
+                    decision(3, 2, 1, None),
+                    decision(4, 1, 1, Some(([0.85, 0.68, 0.31], 23))),
+                ],
+            ),
+            // The newest session has no decision (no bag): the belief stays b's.
+            session("c", Vec::new()),
+        ];
+        let Belief::Carried(b) = Belief::of(&sessions) else {
+            panic!("{:?}", Belief::of(&sessions));
+        };
+        assert_eq!((b.session_id.as_str(), b.session_number), ("b", 2));
+        assert_eq!((b.planned, b.left_table), (3, 1));
+        assert_eq!(b.now.observations, 23);
+        assert_eq!(b.session_start.observations, 20);
+        let right = |a: &BeliefAt| a.levels.map(|l| l.success);
+        assert_eq!(right(&b.now), [0.85, 0.68, 0.31]);
+        assert_eq!(right(&b.session_start), [0.8, 0.55, 0.3]);
+        assert_eq!(b.now.levels[1].success_sd, 0.1);
+        assert_eq!(b.now.levels[0].engagement, 0.4);
+        assert_eq!(b.now.levels[2].engagement_sd, 0.2);
+    }
+
+    #[test]
+    fn a_belief_that_is_not_valid_is_not_read() {
+        let mut short = decision(2, 0, 0, Some(([0.8, 0.5, 0.3], 5)));
+        short.belief_success.pop();
+        let mut out_of_range = decision(3, 0, 0, Some(([0.8, 0.5, 0.3], 6)));
+        out_of_range.belief_success[0] = 1.5;
+        assert_eq!(
+            Belief::of(&[session("a", vec![short.clone(), out_of_range.clone()])]),
+            Belief::NotCarried
+        );
+        let good = decision(1, 0, 0, Some(([0.7, 0.5, 0.3], 4)));
+        let Belief::Carried(b) = Belief::of(&[session("a", vec![good, short, out_of_range])])
+        else {
+            panic!("the good one is read");
+        };
+        assert_eq!((b.planned, b.now.observations), (1, 4));
+    }
 }

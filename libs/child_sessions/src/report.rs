@@ -7,11 +7,13 @@
 //! presentation attributes only, so the page's Content-Security-Policy (no inline style or
 //! script) lets them through.
 
-use crate::progress::{Belief, Progress, SessionProgress};
+use crate::progress::{Belief, BeliefAt, CarriedBelief, Progress, SessionProgress};
 use crate::words::word;
 use figures::progress::{
-    ProgressWords, SessionPoint, engagement_across_sessions_svg, score_and_level_svg,
+    BeliefBar, BeliefWords, ProgressWords, SessionPoint, belief_svg,
+    engagement_across_sessions_svg, score_and_level_svg,
 };
+use sequence_game::Level;
 use std::fmt::Write as _;
 
 /// The report's stylesheet: inlined in the document, served to the therapist page.
@@ -93,6 +95,135 @@ fn figure(svg: &str, id: &str, caption: &str) -> String {
     )
 }
 
+/// `template` with each `{name}` replaced by its value.
+fn filled(template: &str, values: &[(&str, String)]) -> String {
+    values
+        .iter()
+        .fold(template.to_string(), |t, (name, value)| {
+            t.replace(&format!("{{{name}}}"), value)
+        })
+}
+
+/// A chance as whole percent.
+fn percent(p: f64) -> String {
+    format!("{:.0}", p * 100.0)
+}
+
+/// What the robot believes about the child, in words and a small picture (the words are the
+/// picture's text alternative: the figure's caption points to them).
+fn belief_said(p: &Progress, lang: Language) -> String {
+    let w = |key| word(lang, key);
+    let b: &CarriedBelief = match &p.belief {
+        Belief::NoDecisions => {
+            return format!(
+                "<div class=\"said\"><p>{}</p></div>",
+                w("belief_no_decisions")
+            );
+        }
+        Belief::NotCarried => {
+            return format!(
+                "<div class=\"said\"><p>{}</p></div>",
+                w("belief_not_carried")
+            );
+        }
+        Belief::Carried(b) => b,
+    };
+    let date = p
+        .sessions
+        .get(b.session_number.saturating_sub(1))
+        .and_then(|s| s.started_ns)
+        .map(date)
+        .unwrap_or_else(|| b.session_id.clone());
+    let mut html = String::from("<div class=\"said\">");
+    let _ = write!(
+        html,
+        "<p>{}</p><ul>",
+        escape(&filled(
+            w("belief_intro"),
+            &[
+                ("session", b.session_number.to_string()),
+                ("date", date),
+                ("observations", b.now.observations.to_string()),
+            ]
+        ))
+    );
+    for (level, now) in Level::ALL.iter().zip(&b.now.levels) {
+        let line = filled(
+            w("belief_level"),
+            &[
+                ("level", level.get().to_string()),
+                ("length", level.sequence_length().to_string()),
+                ("right", percent(now.success)),
+                ("right_sd", percent(now.success_sd)),
+                ("engagement", format!("{:+.2}", now.engagement)),
+                ("engagement_sd", format!("{:.2}", now.engagement_sd)),
+            ],
+        );
+        let _ = write!(html, "<li>{}</li>", escape(&line));
+    }
+    let _ = write!(html, "</ul><p>{}</p><ul>", w("belief_moved"));
+    for ((level, from), to) in Level::ALL
+        .iter()
+        .zip(&b.session_start.levels)
+        .zip(&b.now.levels)
+    {
+        let line = filled(
+            w("belief_moved_level"),
+            &[
+                ("level", level.get().to_string()),
+                ("from", percent(from.success)),
+                ("to", percent(to.success)),
+                ("from_e", format!("{:+.2}", from.engagement)),
+                ("to_e", format!("{:+.2}", to.engagement)),
+            ],
+        );
+        let _ = write!(html, "<li>{}</li>", escape(&line));
+    }
+    let _ = write!(
+        html,
+        "</ul><p>{}</p></div>",
+        escape(&filled(
+            w("belief_left_table"),
+            &[
+                ("left", b.left_table.to_string()),
+                ("planned", b.planned.to_string()),
+            ]
+        ))
+    );
+    let words = BeliefWords {
+        title: w("belief_figure_title"),
+        right: w("belief_figure_right"),
+        level: w("level"),
+        now: w("belief_figure_now"),
+        session_start: w("belief_figure_start"),
+    };
+    match belief_svg(&belief_bars(&b.now, &b.session_start), &words) {
+        Ok(svg) => html.push_str(&figure(
+            &svg,
+            "progress-belief-caption",
+            w("belief_caption"),
+        )),
+        Err(e) => {
+            let _ = write!(
+                html,
+                "<p>{}: {}</p>",
+                w("belief_figure_title"),
+                escape(&e.to_string())
+            );
+        }
+    }
+    html
+}
+
+/// The figure's bars, in percent.
+fn belief_bars(now: &BeliefAt, start: &BeliefAt) -> [BeliefBar; 3] {
+    std::array::from_fn(|k| BeliefBar {
+        now: now.levels[k].success * 100.0,
+        now_sd: now.levels[k].success_sd * 100.0,
+        session_start: start.levels[k].success * 100.0,
+    })
+}
+
 /// The report's body: an `<article>` whose title is a heading of level `top` (1 alone, 2
 /// inside the therapist page), made at `as_of_ns` (ns since the epoch).
 pub fn progress_fragment(p: &Progress, lang: Language, top: u8, as_of_ns: i64) -> String {
@@ -135,14 +266,11 @@ pub fn progress_fragment(p: &Progress, lang: Language, top: u8, as_of_ns: i64) -
         w("as_of"),
         date_time(as_of_ns)
     );
-    // What the robot believes about the child now; filled in once decisions carry it.
-    let belief = match &p.belief {
-        Belief::NotCarried => w("belief_not_carried"),
-    };
     let _ = write!(
         html,
-        "<section class=\"belief\"><h{h2}>{}</h{h2}><p>{belief}</p></section>",
-        w("belief_title")
+        "<section class=\"belief\"><h{h2}>{}</h{h2}>{}</section>",
+        w("belief_title"),
+        belief_said(p, lang)
     );
     if !p.problems.is_empty() {
         let _ = write!(
@@ -371,6 +499,81 @@ mod tests {
         );
         let en = progress_fragment(&p, Language::En, 2, 0);
         assert!(en.contains("<ul><li>no bag in run-4") && !en.contains("lang=\"en\"><li>"));
+    }
+
+    fn carried() -> Progress {
+        use crate::progress::{CarriedBelief, LevelBelief};
+        let at = |right: [f64; 3], observations| BeliefAt {
+            observations,
+            levels: std::array::from_fn(|k| LevelBelief {
+                success: right[k],
+                success_sd: [0.06, 0.1, 0.15][k],
+                engagement: [0.4, 0.2, -0.1][k],
+                engagement_sd: [0.1, 0.12, 0.2][k],
+            }),
+        };
+        Progress {
+            user: crate::UserId::new("child-7").expect("id"),
+            places: Vec::new(),
+            sessions: Vec::new(),
+            problems: Vec::new(),
+            last_decision: None,
+            belief: Belief::Carried(Box::new(CarriedBelief {
+                session_id: "tablet-1".into(),
+                session_number: 3,
+                now: at([0.85, 0.68, 0.31], 29),
+                session_start: at([0.8, 0.55, 0.3], 20),
+                planned: 10,
+                left_table: 3,
+            })),
+        }
+    }
+
+    #[test]
+    fn the_belief_is_said_in_words_and_drawn_in_both_languages() {
+        let p = carried();
+        let en = progress_fragment(&p, Language::En, 2, 0);
+        for said in [
+            "after 29 sequences of the child&#39;s own",
+            "Level 1 (3 emotions): right about 85\u{a0}% of the time (±\u{a0}6), engagement +0.40 \
+             (±\u{a0}0.10)",
+            "Level 3 (7 emotions): right about 31\u{a0}% of the time (±\u{a0}15), engagement -0.10 \
+             (±\u{a0}0.20)",
+            "level 2: 55\u{a0}% → 68\u{a0}% right, engagement +0.20 → +0.20",
+            "chose differently from the group&#39;s table in 3 of 10 sequences",
+        ] {
+            assert!(en.contains(said), "{said}\n{en}");
+        }
+        // The picture, named by its caption.
+        assert!(
+            en.contains("<svg role=\"img\" aria-labelledby=\"progress-belief-caption\"")
+                && en.contains("<figcaption id=\"progress-belief-caption\">Per level"),
+            "{en}"
+        );
+        let de = progress_fragment(&p, Language::De, 2, 0);
+        for said in [
+            "nach 29 eigenen Sequenzen des Kindes",
+            "Level 2 (5 Emotionen): etwa 68\u{a0}% der Antworten richtig (±\u{a0}10), Engagement \
+             +0.20 (±\u{a0}0.12)",
+            "Level 1: 80\u{a0}% → 85\u{a0}% richtig",
+            "in 3 von 10 Sequenzen anders als die Tabelle der Gruppe",
+            "Chance einer richtigen Antwort je Level",
+        ] {
+            assert!(de.contains(said), "{said}\n{de}");
+        }
+        let not_carried = Progress {
+            belief: Belief::NotCarried,
+            ..carried()
+        };
+        let en = progress_fragment(&not_carried, Language::En, 2, 0);
+        assert!(
+            en.contains("Not available: the robot did not learn about this child")
+                && en.contains("table of its group of children")
+                && !en.contains("progress-belief-caption"),
+            "{en}"
+        );
+        let de = progress_fragment(&not_carried, Language::De, 2, 0);
+        assert!(de.contains("Tabelle seiner Gruppe"), "{de}");
     }
 
     /// Every key the report looks up is in `words` in both languages.

@@ -11,11 +11,66 @@ pub(crate) fn word(lang: Language, key: &str) -> &'static str {
             "What the robot believes now",
             "Was der Roboter jetzt annimmt",
         ),
+        "belief_no_decisions" => (
+            "Not available: no decision of the robot is stored for this child (no session, or \
+             no readable recording).",
+            "Nicht verfügbar: von diesem Kind ist keine Entscheidung des Roboters gespeichert \
+             (keine Sitzung, oder keine lesbare Aufzeichnung).",
+        ),
         "belief_not_carried" => (
-            "Not available: the robot's decisions do not carry a belief about the child yet \
-             (its chance of success and engagement per level, and how sure it is).",
-            "Nicht verfügbar: die Entscheidungen des Roboters enthalten noch keine Annahme über \
-             das Kind (Erfolgschance und Engagement je Level, und wie sicher er ist).",
+            "Not available: the robot did not learn about this child on its own. It chose each \
+             step from the table of its group of children (the user model's cluster), so it \
+             holds no belief about this child's chance of success and engagement per level.",
+            "Nicht verfügbar: der Roboter hat dieses Kind nicht für sich allein kennengelernt. \
+             Er wählte jeden Schritt aus der Tabelle seiner Gruppe von Kindern (dem Cluster des \
+             Nutzermodells) und hat daher keine Annahme über Erfolgschance und Engagement dieses \
+             Kindes je Level.",
+        ),
+        // {session}, {date}, {observations}: the last session planned on the belief.
+        "belief_intro" => (
+            "As the robot planned the last sequence of session {session} ({date}), after \
+             {observations} sequences of the child's own, it believed:",
+            "Als der Roboter die letzte Sequenz von Sitzung {session} ({date}) plante, nach \
+             {observations} eigenen Sequenzen des Kindes, nahm er an:",
+        ),
+        // Non-breaking spaces keep "85 %" and "± 6" whole on a narrow tablet.
+        // {level}, {length} emotions; {right} % right (± {right_sd}); {engagement} (± {engagement_sd}).
+        "belief_level" => (
+            "Level {level} ({length} emotions): right about {right}\u{a0}% of the time (±\u{a0}\
+             {right_sd}), engagement {engagement} (±\u{a0}{engagement_sd})",
+            "Level {level} ({length} Emotionen): etwa {right}\u{a0}% der Antworten richtig (±\u{a0}\
+             {right_sd}), Engagement {engagement} (±\u{a0}{engagement_sd})",
+        ),
+        "belief_moved" => (
+            "How it moved during that session, from its first sequence to its last:",
+            "Wie es sich in dieser Sitzung bewegte, von der ersten Sequenz zur letzten:",
+        ),
+        // {level}: {from} % → {to} %, engagement {from_e} → {to_e}.
+        "belief_moved_level" => (
+            "level {level}: {from}\u{a0}% → {to}\u{a0}% right, engagement {from_e} → {to_e}",
+            "Level {level}: {from}\u{a0}% → {to}\u{a0}% richtig, Engagement {from_e} → {to_e}",
+        ),
+        "belief_left_table" => (
+            "It chose differently from the group's table in {left} of {planned} sequences.",
+            "Er wählte in {left} von {planned} Sequenzen anders als die Tabelle der Gruppe.",
+        ),
+        "belief_figure_title" => (
+            "Chance of a right answer per level",
+            "Chance einer richtigen Antwort je Level",
+        ),
+        "belief_figure_right" => ("right, %", "richtig, %"),
+        "belief_figure_now" => (
+            "now, ± 1 standard deviation",
+            "jetzt, ± 1 Standardabweichung",
+        ),
+        "belief_figure_start" => ("at the session's start", "zu Beginn der Sitzung"),
+        "belief_caption" => (
+            "Per level, the chance of a right answer the robot believes now (dark bar, its \
+             whisker ± 1 standard deviation) and at that session's start (pale bar on its \
+             left). The numbers are in the list above.",
+            "Je Level die Chance einer richtigen Antwort, die der Roboter jetzt annimmt \
+             (dunkler Balken, sein Strich ± 1 Standardabweichung), und zu Beginn dieser \
+             Sitzung (heller Balken links daneben). Die Zahlen stehen in der Liste oben.",
         ),
         "problems_title" => (
             "Not read, or read in part",
@@ -105,7 +160,18 @@ pub(crate) fn word(lang: Language, key: &str) -> &'static str {
 pub(crate) const KEYS: &[&str] = &[
     "progress_of",
     "belief_title",
+    "belief_no_decisions",
     "belief_not_carried",
+    "belief_intro",
+    "belief_level",
+    "belief_moved",
+    "belief_moved_level",
+    "belief_left_table",
+    "belief_figure_title",
+    "belief_figure_right",
+    "belief_figure_now",
+    "belief_figure_start",
+    "belief_caption",
     "problems_title",
     "problems_in_english",
     "across_title",

@@ -2,8 +2,10 @@
 //! out of the best possible and the level played (two panels on one axis of sessions), and the
 //! expected engagement. Each session's spread (its lowest and highest level, its sequences'
 //! lowest and highest engagement) is a bar around its mean, so a session that moved between
-//! levels does not look like one that stayed. The words come from the caller (the report is in
-//! English and German).
+//! levels does not look like one that stayed. And what the robot believes about the child: per
+//! level the chance of a right answer now, with a whisker of one standard deviation, beside a
+//! pale bar where it stood at the session's start. The words come from the caller (the report
+//! is in English and German).
 
 use crate::engagement::PlotError;
 use plotters::prelude::*;
@@ -262,6 +264,107 @@ pub fn engagement_across_sessions_svg(
     Ok(svg)
 }
 
+/// The belief at one level, in percent: the chance of a right answer now with its standard
+/// deviation, and at the session's start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BeliefBar {
+    pub now: f64,
+    pub now_sd: f64,
+    pub session_start: f64,
+}
+
+/// The belief figure's words, in the report's language.
+#[derive(Debug, Clone, Copy)]
+pub struct BeliefWords<'a> {
+    pub title: &'a str,
+    /// The y axis (`chance of a right answer, %`).
+    pub right: &'a str,
+    /// Before the level's number on the x axis (`level`).
+    pub level: &'a str,
+    pub now: &'a str,
+    pub session_start: &'a str,
+}
+
+/// Per level 1..3 the chance of a right answer the robot believes now (a dark bar with a
+/// whisker of ± 1 standard deviation, clipped to 0..100 %) and at the session's start (a pale
+/// bar on its left), as SVG.
+pub fn belief_svg(levels: &[BeliefBar; 3], words: &BeliefWords<'_>) -> Result<String, PlotError> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 360)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(words.title, (FONT, 24))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(64)
+            // Headroom above 100 % for the legend, so it covers no bar or whisker.
+            .build_cartesian_2d(0.5..3.5, 0.0..140.0)
+            .map_err(draw_err)?;
+        let level_label = |v: &f64| {
+            if (v - v.round()).abs() < 1e-6 && (1.0..=3.0).contains(v) {
+                format!("{} {v:.0}", words.level)
+            } else {
+                String::new()
+            }
+        };
+        chart
+            .configure_mesh()
+            // Half steps, so each level's whole number is a key point; only those are named.
+            .x_labels(7)
+            .y_labels(8)
+            .x_label_formatter(&level_label)
+            .y_label_formatter(&|v| if *v <= 100.0 { whole(v) } else { String::new() })
+            .y_desc(words.right)
+            .label_style((FONT, 18).into_font().color(&AXIS))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(draw_err)?;
+        let at = |k: usize| k as f64 + 1.0;
+        let clip = |v: f64| v.clamp(0.0, 100.0);
+        chart
+            .draw_series(levels.iter().enumerate().map(|(k, b)| {
+                let x = at(k) - 0.2;
+                Rectangle::new(
+                    [(x - 0.07, 0.0), (x + 0.07, clip(b.session_start))],
+                    BEST.filled(),
+                )
+            }))
+            .map_err(draw_err)?
+            .label(words.session_start)
+            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], BEST.filled()));
+        chart
+            .draw_series(levels.iter().enumerate().map(|(k, b)| {
+                let x = at(k) + 0.05;
+                Rectangle::new([(x - 0.14, 0.0), (x + 0.14, clip(b.now))], SCORE.filled())
+            }))
+            .map_err(draw_err)?
+            .label(words.now)
+            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], SCORE.filled()));
+        chart
+            .draw_series(levels.iter().enumerate().map(|(k, b)| {
+                ErrorBar::new_vertical(
+                    at(k) + 0.05,
+                    clip(b.now - b.now_sd),
+                    clip(b.now),
+                    clip(b.now + b.now_sd),
+                    AXIS.stroke_width(2),
+                    16,
+                )
+            }))
+            .map_err(draw_err)?;
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT, 18))
+            .background_style(WHITE.mix(0.9))
+            .border_style(AXIS)
+            .draw()
+            .map_err(draw_err)?;
+    }
+    Ok(svg)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -322,6 +425,62 @@ mod tests {
         assert!(
             !svg.contains("\n2.5\n") && svg.contains("\n50\n"),
             "session labels"
+        );
+    }
+
+    #[test]
+    fn the_belief_has_a_bar_a_whisker_and_a_session_start_per_level() {
+        let words = BeliefWords {
+            title: "What the robot believes",
+            right: "right, %",
+            level: "level",
+            now: "now, ± 1 sd",
+            session_start: "at the session's start",
+        };
+        let bars = [
+            BeliefBar {
+                now: 85.0,
+                now_sd: 6.0,
+                session_start: 80.0,
+            },
+            BeliefBar {
+                now: 68.0,
+                now_sd: 10.0,
+                session_start: 55.0,
+            },
+            // A whisker past 100 % is clipped to the axis.
+            BeliefBar {
+                now: 97.0,
+                now_sd: 12.0,
+                session_start: 30.0,
+            },
+        ];
+        let svg = belief_svg(&bars, &words).expect("draws");
+        assert!(svg.starts_with("<svg") && svg.contains("viewBox"));
+        // Per level a pale and a dark bar (and the legend's marks).
+        assert_eq!(svg.matches(r##"fill="#BBDEFB""##).count(), 3 + 1, "{svg}");
+        assert_eq!(svg.matches(r##"fill="#1565C0""##).count(), 3 + 1);
+        for word in [
+            "What the robot believes",
+            "level 1",
+            "level 3",
+            "now, ± 1 sd",
+        ] {
+            assert!(svg.contains(word), "{word}");
+        }
+        // The bars grow with the chance: level 2's start bar is shorter than its now bar.
+        let heights: Vec<f64> = svg
+            .lines()
+            .filter(|l| l.contains("<rect") && l.contains("#BBDEFB"))
+            .filter_map(|l| {
+                let h = l.split("height=\"").nth(1)?.split('"').next()?;
+                h.parse().ok()
+            })
+            .collect();
+        assert_eq!(heights.len(), 4, "{heights:?}");
+        assert!(
+            heights[0] > heights[1] && heights[1] > heights[2],
+            "{heights:?}"
         );
     }
 }
