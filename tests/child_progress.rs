@@ -1,14 +1,16 @@
 //! The child list and a child's progress read from a robot's stored sessions as the suite
 //! writes them (`stored_sessions`: the game manager's session files and the recorder's bags):
 //! 200 children with a session each, one child with 50 sessions (one of its runs' bags cut
-//! short, another run without a bag) and one with a single session. The list names every
+//! short, another run without a bag; its decisions planned on a belief about the child) and
+//! one with a single session. The list names every
 //! child with its sessions and last date; the progress holds every session with the numbers
 //! its session files and bags hold, each result once; the damaged and the missing bag are
-//! named and the rest still shown; erasing a child (`child_data`) takes it off the list and
+//! named and the rest still shown; what the robot believes about the child is read from the
+//! last session's decisions (and said to be missing where they carry none); erasing a child (`child_data`) takes it off the list and
 //! deletes its progress report; the report (`session_report --user`, English and German) is
 //! one self-contained page.
 
-use child_sessions::{Language, Progress, UserId, children, progress_document};
+use child_sessions::{Belief, Language, Progress, UserId, children, progress_document};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -23,6 +25,7 @@ fn stored(root: &Path) {
         .arg(root)
         .args(["--children", "200", "--child", "child-fifty:50", "--child"])
         .arg(format!("{ONE}:1"))
+        .args(["--planned-on-belief", FIFTY])
         .args(["--damaged-bag", "2", "--missing-bag", "4"])
         .output()
         .expect("stored_sessions runs");
@@ -134,6 +137,22 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
     );
     assert!(named("no bag in") && named("run-004"), "{:#?}", p.problems);
     assert!(p.problems.len() <= 3, "nothing else: {:#?}", p.problems);
+    // The belief: from the fiftieth session (run-005 has its bag), its first and last
+    // decisions, after the child's 49 sessions before it.
+    let Belief::Carried(b) = &p.belief else {
+        panic!("{:?}", p.belief);
+    };
+    assert_eq!(
+        (b.session_number, b.session_id.as_str()),
+        (50, p.sessions[49].session_id.as_str())
+    );
+    assert_eq!(Some(b.planned), p.sessions[49].decisions);
+    assert!(b.left_table <= b.planned);
+    assert_eq!(b.session_start.observations, 490);
+    assert!(b.now.observations > b.session_start.observations);
+    for (start, now) in b.session_start.levels.iter().zip(&b.now.levels) {
+        assert!(now.success >= start.success && now.success_sd <= start.success_sd);
+    }
 
     let en = progress_document(&p, Language::En, 0);
     let de = progress_document(&p, Language::De, 0);
@@ -143,7 +162,7 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
             [
                 "Progress of child-fifty",
                 "What the robot believes now",
-                "Not available",
+                "Level 1 (3 emotions): right about",
             ],
         ),
         (
@@ -151,7 +170,7 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
             [
                 "Verlauf von child-fifty",
                 "Was der Roboter jetzt annimmt",
-                "Nicht verfügbar",
+                "Level 1 (3 Emotionen): etwa",
             ],
         ),
     ] {
@@ -159,7 +178,8 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
             assert!(html.contains(w), "{w}");
         }
         assert_eq!(html.matches("<tr data-session=").count(), 50);
-        assert_eq!(html.matches("<svg role=\"img\"").count(), 2);
+        // Two figures across sessions, and the belief's.
+        assert_eq!(html.matches("<svg role=\"img\"").count(), 3);
         assert!(
             html.contains("@page { size: A4"),
             "the print stylesheet is inlined"
@@ -173,8 +193,10 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
     // One session, and none.
     let p = Progress::build(&UserId::new(ONE).expect("id"), &places).expect("progress");
     assert_eq!(p.sessions.len(), 1);
+    assert_eq!(p.belief, Belief::NotCarried);
     let html = progress_document(&p, Language::En, 0);
     assert_eq!(html.matches("<tr data-session=").count(), 1);
+    assert!(html.contains("Not available: the robot did not learn about this child"));
     let none = Progress::build(&UserId::new("child-new").expect("id"), &places).expect("none");
     assert!(none.sessions.is_empty() && none.problems.is_empty());
     assert!(progress_document(&none, Language::En, 0).contains("No session of this child"));
@@ -190,7 +212,10 @@ fn the_list_and_the_progress_are_read_from_what_is_stored() {
         .expect("session_report runs");
     assert!(out.status.success(), "{out:?}");
     let written = std::fs::read_to_string(&out_file).expect("the report");
-    assert!(written.contains("Verlauf von child-fifty"));
+    assert!(
+        written.contains("Verlauf von child-fifty")
+            && written.contains("anders als die Tabelle der Gruppe")
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("is damaged"), "{stderr}");
 

@@ -5,12 +5,18 @@
 //! it and one `session.mcap` of their results, decisions, proposals and game states.
 //!   stored_sessions --root DIR --children 200                 # child-001 .. child-200, a session each
 //!   stored_sessions --root DIR --child child-7:50 --damaged-bag 2 --missing-bag 4
+//!   stored_sessions --root DIR --child child-7:12 --planned-on-belief child-7
 //! A child's sessions are played ten to a run, one a day, from 2026-03-02 09:00 UTC (the
 //! one-session children five a day); what
 //! each sequence does (level, answer, engagement, feedback, a therapist's override, a pause,
 //! proposals) is drawn from `--seed`, improving over the child's sessions. `--damaged-bag K`
 //! cuts the K-th run's bag short (as a power cut leaves it), `--missing-bag K` leaves the
-//! K-th run without one (K counts the runs written, from 1).
+//! K-th run without one (K counts the runs written, from 1). `--planned-on-belief CODE` makes
+//! that child's decisions carry a belief about the child, as the behaviour policy's with its
+//! `child_belief` parameter on (`msgs/msg/Decision.msg`): per level the chance of a right
+//! answer (the one the answers are drawn from, so it grows over the child's sequences) and the
+//! engagement expected, each with a standard deviation that shrinks with the sequences
+//! observed, and now and then an action other than the cluster's table would have taken.
 
 use anyhow::{Context, bail};
 use bag_file::{BagWriter, WriterOptions};
@@ -47,6 +53,10 @@ struct Cli {
     /// Write no bag for the K-th run.
     #[arg(long, value_name = "K")]
     missing_bag: Option<usize>,
+    /// This child's decisions are planned on a belief about the child (may be given more than
+    /// once).
+    #[arg(long = "planned-on-belief", value_name = "CODE")]
+    planned_on_belief: Vec<String>,
 }
 
 const SEQUENCES: u8 = 10;
@@ -64,6 +74,8 @@ struct Planned {
     nth: usize,
     of: usize,
     start_ns: i64,
+    /// Its decisions carry a belief about the child.
+    belief: bool,
 }
 
 /// One run directory's bag, written as its sessions are.
@@ -82,6 +94,7 @@ fn stamp(ns: i64) -> Time {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let mut plan: Vec<Vec<Planned>> = Vec::new();
+    let believed = |user: &str| cli.planned_on_belief.iter().any(|b| b == user);
     let mut add_child = |user: String, count: usize, day0: i64| {
         let sessions: Vec<Planned> = (0..count)
             .map(|nth| Planned {
@@ -89,6 +102,7 @@ fn main() -> anyhow::Result<()> {
                 nth,
                 of: count,
                 start_ns: FIRST_DAY_NS + (day0 + nth as i64) * DAY_NS,
+                belief: believed(&user),
             })
             .collect();
         for chunk in sessions.chunks(SESSIONS_PER_RUN) {
@@ -109,6 +123,7 @@ fn main() -> anyhow::Result<()> {
             nth: 0,
             of: 1,
             start_ns: FIRST_DAY_NS + (k as i64) * DAY_NS / 5,
+            belief: believed(&format!("child-{k:03}")),
         })
         .collect();
     for chunk in singles.chunks(SESSIONS_PER_RUN) {
@@ -135,6 +150,56 @@ fn main() -> anyhow::Result<()> {
         cli.root.display()
     );
     Ok(())
+}
+
+/// How far the child has come (0..1) in session `p`: later sessions go better.
+fn progress_at(p: &Planned) -> f64 {
+    if p.of > 1 {
+        p.nth as f64 / (p.of - 1) as f64
+    } else {
+        0.5
+    }
+}
+
+/// The chance of a right answer at `level` (the answers are drawn from it).
+fn p_right(level: u8, progress: f64) -> f64 {
+    let p = match level {
+        1 => 0.85 + 0.1 * progress,
+        2 => 0.6 + 0.3 * progress,
+        _ => 0.35 + 0.45 * progress,
+    };
+    p.min(1.0)
+}
+
+/// Fills in the belief `decision` (of sequence `index` of session `p`) was planned on: near the
+/// chance of a right answer the answers are drawn from and the engagement they go with, after
+/// the child's sequences so far, with standard deviations of a Beta posterior of that many;
+/// one decision in four left the table's action (the table would have taken the next one).
+fn believe(decision: &mut Decision, p: &Planned, index: u8, rng: &mut ChaCha8Rng) {
+    let observations = p.nth * usize::from(SEQUENCES) + usize::from(index) - 1;
+    // What the belief has learnt by this sequence: it follows the child's progress a session
+    // behind, and moves through the session.
+    let progress = if p.of > 1 {
+        (p.nth as f64 + f64::from(index) / f64::from(SEQUENCES)) / p.of as f64
+    } else {
+        0.5
+    };
+    let n = observations as f64 + 2.0;
+    decision.planned_on_belief = true;
+    decision.belief_observations = observations as u32;
+    decision.belief_success = (1..=3).map(|l| p_right(l, progress)).collect();
+    decision.belief_success_sd = decision
+        .belief_success
+        .iter()
+        .map(|s| (s * (1.0 - s) / (n + 1.0)).sqrt())
+        .collect();
+    decision.belief_engagement = (1..=3)
+        .map(|l| (0.6 * progress - 0.1 - 0.1 * f64::from(l - 1)).clamp(-1.0, 1.0))
+        .collect();
+    decision.belief_engagement_sd = vec![0.5 / n.sqrt(); 3];
+    if rng.random_bool(0.25) {
+        decision.baseline_action = (decision.action + 1) % 5;
+    }
 }
 
 /// Keeps the first two thirds of `bag`: its summary and index are lost, and the chunks after
@@ -191,11 +256,7 @@ fn write_session(
     let mut rng = ChaCha8Rng::seed_from_u64(key.wrapping_add(p.nth as u64));
     let session_id = format!("tablet-{}", p.start_ns / 1_000_000);
     // Later sessions go better: more right answers, more engagement.
-    let progress = if p.of > 1 {
-        p.nth as f64 / (p.of - 1) as f64
-    } else {
-        0.5
-    };
+    let progress = progress_at(p);
     let mut t = p.start_ns;
     files.append_journal(&JournalEntry::Started {
         session_id: session_id.clone(),
@@ -244,7 +305,7 @@ fn write_session(
         if let Some(b) = bag.as_deref_mut()
             && !overridden
         {
-            let decision = Decision {
+            let mut decision = Decision {
                 header: Header::at(stamp(t)),
                 session_id: session_id.clone(),
                 step: index,
@@ -261,6 +322,9 @@ fn write_session(
                 baseline_action: action,
                 ..Default::default()
             };
+            if p.belief {
+                believe(&mut decision, p, index, &mut rng);
+            }
             b.writer.write(b.decisions, t as u64, &decision)?;
             // Supervised autonomy in every third session: each decision proposed, most
             // accepted, the sixth left to run out.
@@ -320,12 +384,7 @@ fn write_session(
                 })?;
             }
         }
-        let p_right = match level_played {
-            1 => 0.85 + 0.1 * progress,
-            2 => 0.6 + 0.3 * progress,
-            _ => 0.35 + 0.45 * progress,
-        };
-        let right = rng.random_bool(p_right.min(1.0));
+        let right = rng.random_bool(p_right(level_played, progress));
         let length = 2 * usize::from(level_played) + 1;
         let sequence: Vec<String> = (0..length)
             .map(|_| EMOTIONS[rng.random_range(0..4)].to_string())

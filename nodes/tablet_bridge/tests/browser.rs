@@ -255,11 +255,13 @@ const CHILDREN_INNER: &str = "TABLET_CHILDREN_TEST_INNER";
 
 /// The bridge alone (no game) over a robot's stored sessions as the suite writes them
 /// (`stored_sessions`: 200 children with a session each, one with 50 sessions whose runs
-/// include a bag cut short and one without a bag, one with a single session), once in English
-/// and once in German, at the tablet's two orientations: the list holds all 202 codes and its
-/// search finds one; the progress of 50, 1 and 0 sessions shows, naming the damaged and the
-/// missing bag; a new code is checked by the bridge; the 50 sessions print to A4. axe-core
-/// checks every page and state.
+/// include a bag cut short and one without a bag and whose decisions were planned on a belief
+/// about the child, one with a single session), once in English and once in German, at the
+/// tablet's two orientations: the list holds all 202 codes and its search finds one; the
+/// progress of 50, 1 and 0 sessions shows, naming the damaged and the missing bag, with what
+/// the robot believes about the fifty-session child in words and a picture and that it has no
+/// belief about the one-session child; a new code is checked by the bridge; the 50 sessions
+/// print to A4. axe-core checks every page and state.
 #[test]
 fn the_therapist_finds_a_child_among_200_and_prints_their_progress_in_both_languages() {
     if std::env::var_os(CHILDREN_INNER).is_some() {
@@ -314,6 +316,11 @@ struct Words {
     progress_of: &'static str,
     no_session: &'static str,
     empty_code: &'static str,
+    /// What the robot believes: a level's line, how often it left the group's table, and
+    /// that it has none.
+    belief_level: &'static str,
+    belief_left_table: &'static str,
+    belief_not_carried: &'static str,
 }
 
 const ENGLISH: Words = Words {
@@ -323,6 +330,9 @@ const ENGLISH: Words = Words {
     progress_of: "Progress of",
     no_session: "No session of this child",
     empty_code: "is empty",
+    belief_level: "Level 2 (5 emotions): right about",
+    belief_left_table: "chose differently from the group's table in",
+    belief_not_carried: "Not available: the robot did not learn about this child",
 };
 const GERMAN: Words = Words {
     lang: "de",
@@ -331,6 +341,9 @@ const GERMAN: Words = Words {
     progress_of: "Verlauf von",
     no_session: "noch keine Sitzung gespeichert",
     empty_code: "is empty",
+    belief_level: "Level 2 (5 Emotionen): etwa",
+    belief_left_table: "anders als die Tabelle der Gruppe",
+    belief_not_carried: "Nicht verfügbar: der Roboter hat dieses Kind nicht",
 };
 
 async fn children_inner() {
@@ -352,6 +365,7 @@ async fn children_inner() {
         .arg("--root")
         .arg(&root)
         .args(["--children", "200", "--child", "child-fifty:50"])
+        .args(["--planned-on-belief", "child-fifty"])
         .args([
             "--child",
             "child-one:1",
@@ -474,7 +488,21 @@ async fn the_children_in_one_language(page: &Page, port: u16, words: &Words, sho
             .starts_with(words.progress_of)
     );
     assert_eq!(page.count("#progress tbody tr").await, 50);
-    assert_eq!(page.count("#progress figure svg[role=img]").await, 2);
+    // Across sessions two figures, and what the robot believes as the third.
+    assert_eq!(page.count("#progress figure svg[role=img]").await, 3);
+    let belief = page.text("#progress .belief").await;
+    assert!(
+        belief.contains(words.belief_level)
+            && belief.contains(words.belief_left_table)
+            && belief.contains("→"),
+        "{belief}"
+    );
+    assert_eq!(page.count("#progress .belief li").await, 6, "{belief}");
+    assert_eq!(
+        page.count("#progress .belief svg[aria-labelledby=progress-belief-caption]")
+            .await,
+        1
+    );
     let problems = page.text("#progress .problems").await;
     assert!(
         problems.contains("run-002/session.mcap is damaged") && problems.contains("no bag in"),
@@ -528,6 +556,12 @@ async fn the_children_in_one_language(page: &Page, port: u16, words: &Words, sho
     )
     .await;
     assert_eq!(page.count("#progress tbody tr").await, 1);
+    assert!(
+        page.text("#progress .belief")
+            .await
+            .contains(words.belief_not_carried),
+        "no belief about the one-session child"
+    );
     page.assert_accessible(&format!(
         "therapist, progress of 1 session, {lang}, 800x1280"
     ))
