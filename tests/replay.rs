@@ -1179,9 +1179,13 @@ fn the_tablet_bridge_replayed_publishes_what_its_pages_did() {
 /// The child's frame period at the launch's 30 fps.
 const FRAME_NS: i64 = 33_333_333;
 
+/// The most frames the recorder may have missed before its reader matched the child's writer.
+const MISSED_FRAMES: i64 = 90;
+
 /// Inputs: the game states, tablet tasks and robot faces at their log times; the child starts
-/// at its frame clock's origin (its first frame's stamp: the recorder heard it from the first
-/// frame on) with the launch's parameters (the sample's seed, cluster and time scale).
+/// at its frame clock's origin (the first recorded frame's stamp, or up to [`MISSED_FRAMES`]
+/// frames before it where the recorder's reader matched late: the start that draws the first
+/// recorded frame alike) with the launch's parameters (the sample's seed, cluster and time scale).
 ///
 /// Compared: the frame clock, every recorded frame on the child's 30 fps grid from its origin
 /// (within 1 ms: the live child stamps a frame with its steady clock plus the wall clock's
@@ -1200,42 +1204,69 @@ fn the_simulated_child_replayed_keeps_the_recorded_frame_clock_and_answers_its_t
         let bag = open(sample);
         let (_, last) = span(&bag);
         let frames = recorded::<OpenFaceFeatures>(&bag, OPENFACE_FEATURES.name);
-        let origin = frames[0].1.header.stamp.to_nanos();
+        let first = frames[0].1.header.stamp.to_nanos();
         let inputs = recorded_inputs(
             &bag,
             &[GAME_STATE.name, TABLET_TASK.name, ROBOT_EMOTION.name],
         );
         let (seed, cluster, time_scale) = (sample.seed, sample.cluster, sample.time_scale);
-        let replayed = virtual_time(async move {
-            let mut r = Replay::new(
-                inputs,
-                &[OPENFACE_FEATURES.name, TABLET_ANSWER.name],
-                origin,
-            );
-            let (defaults, _) =
-                parameters::<simulated_child::ChildParams>(simulated_child::node::NODE, &[]);
-            let (params, _) = parameters::<simulated_child::ChildParams>(
-                simulated_child::node::NODE,
-                &[
-                    absolute("user_model_file", &defaults.user_model_file),
-                    format!("seed:={seed}"),
-                    format!("cluster:={cluster}"),
-                    format!("time_scale:={time_scale}"),
-                ],
-            );
-            r.start(
-                simulated_child::node::NODE,
-                origin,
-                Box::new(move |bus| Box::pin(simulated_child::node::run(bus, params))),
-            );
-            r.finish(Some(last)).await.bag
-        });
-
-        let replayed_frames: BTreeMap<i64, OpenFaceFeatures> =
-            recorded::<OpenFaceFeatures>(&replayed, OPENFACE_FEATURES.name)
+        let replay_from = |origin: i64| {
+            let inputs = inputs.clone();
+            virtual_time(async move {
+                let mut r = Replay::new(
+                    inputs,
+                    &[OPENFACE_FEATURES.name, TABLET_ANSWER.name],
+                    origin,
+                );
+                let (defaults, _) =
+                    parameters::<simulated_child::ChildParams>(simulated_child::node::NODE, &[]);
+                let (params, _) = parameters::<simulated_child::ChildParams>(
+                    simulated_child::node::NODE,
+                    &[
+                        absolute("user_model_file", &defaults.user_model_file),
+                        format!("seed:={seed}"),
+                        format!("cluster:={cluster}"),
+                        format!("time_scale:={time_scale}"),
+                    ],
+                );
+                r.start(
+                    simulated_child::node::NODE,
+                    origin,
+                    Box::new(move |bus| Box::pin(simulated_child::node::run(bus, params))),
+                );
+                r.finish(Some(last)).await.bag
+            })
+        };
+        let frames_of = |bag: &BagReader| -> BTreeMap<i64, OpenFaceFeatures> {
+            recorded::<OpenFaceFeatures>(bag, OPENFACE_FEATURES.name)
                 .into_iter()
                 .map(|(_, m)| (m.header.stamp.to_nanos(), m))
-                .collect();
+                .collect()
+        };
+        let drawn_alike = |got: &OpenFaceFeatures, live: &OpenFaceFeatures| {
+            let mut drawn = got.clone();
+            drawn.header.stamp = live.header.stamp.clone();
+            &drawn == live
+        };
+        // The child's origin, its frame 0: the recorder hears its frames only once its reader
+        // has matched (best effort, volatile), so the first recorded frame may be a later one.
+        // The child started then or up to `MISSED_FRAMES` frames earlier: the start whose
+        // replay draws the first recorded frame as the live child did.
+        let (missed, origin, replayed) = (0..=MISSED_FRAMES)
+            .find_map(|k0| {
+                let origin = first - k0 * FRAME_NS;
+                let replayed = replay_from(origin);
+                frames_of(&replayed)
+                    .get(&origin.saturating_add(k0 * FRAME_NS))
+                    .is_some_and(|got| drawn_alike(got, &frames[0].1))
+                    .then_some((k0, origin, replayed))
+            })
+            .unwrap_or_else(|| {
+                panic!(
+                    "{f}: no start up to {MISSED_FRAMES} frames before the first recorded draws it"
+                )
+            });
+        let replayed_frames = frames_of(&replayed);
         let mut equal = 0;
         let mut wander: i64 = 0;
         for (_, live) in &frames {
@@ -1256,16 +1287,15 @@ fn the_simulated_child_replayed_keeps_the_recorded_frame_clock_and_answers_its_t
                 (&live.face_id, &live.header.frame_id),
                 "{f}: frame {k}"
             );
-            let mut drawn = got.clone();
-            drawn.header.stamp = live.header.stamp.clone();
-            equal += usize::from(&drawn == live);
+            equal += usize::from(drawn_alike(got, live));
         }
         assert_eq!(equal, frames.len(), "{f}: frames drawn the same");
         assert!(
             replayed_frames.keys().all(|t| (t - origin) % FRAME_NS == 0),
             "{f}: a replayed frame off the frame clock"
         );
-        let extra = replayed_frames.len() - frames.len();
+        // Frames before the first recorded one are the ones the recorder missed.
+        let extra = replayed_frames.range(first..).count() - frames.len();
         assert!(
             extra * 50 <= frames.len(),
             "{f}: {extra} replayed frames the bag lacks"
@@ -1302,9 +1332,9 @@ fn the_simulated_child_replayed_keeps_the_recorded_frame_clock_and_answers_its_t
         }
         assert!(!answers.is_empty(), "{f}: no task answered");
         eprintln!(
-            "{f}: {} frames on the recorded frame clock (within {wander} ns; {extra} more \
-             replayed; {equal} drawn the same); {} of {} tasks answered as recorded (the live \
-             child answered {})",
+            "{f}: {} frames on the recorded frame clock (from frame {missed}; within {wander} \
+             ns; {extra} more replayed; {equal} drawn the same); {} of {} tasks answered as \
+             recorded (the live child answered {})",
             frames.len(),
             answers.len(),
             tasks.len(),
