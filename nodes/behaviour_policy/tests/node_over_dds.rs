@@ -424,8 +424,7 @@ fn probe_options(probe_params: &Path) -> node_shell::ShellOptions {
 }
 
 fn bad_input_inside_the_namespace() {
-    use node_shell::{NoParameters, NodeShell};
-    use qt_therapy_msgs::topics::{DECIDE_ACTION, DECISION, SEQUENCE_RESULT};
+    use qt_therapy_msgs::topics::{DECISION, SEQUENCE_RESULT};
 
     let dir = tempfile::tempdir().expect("temp dir");
     let q_tables = dir.path().join("q_tables");
@@ -476,19 +475,9 @@ fn bad_input_inside_the_namespace() {
         .build()
         .expect("runtime");
     let (refused_calls, refused_results) = runtime.block_on(async {
-        let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
-                .expect("probe node");
-        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let (mut shell, decide) = probe_with_client(&probe_params, &node_log).await;
         let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
         let mut decisions = shell.subscribe(DECISION, 16).expect("subscription");
-        assert!(
-            shell
-                .wait_for_service(&decide, Duration::from_secs(30))
-                .await,
-            "no DecideAction server:\n{}",
-            node_log()
-        );
         let timeout = Duration::from_secs(10);
         let start = BehaviourState::from_state(State::START);
 
@@ -689,8 +678,7 @@ fn bad_input_inside_the_namespace() {
 }
 
 fn per_user_inside_the_namespace() {
-    use node_shell::{NoParameters, NodeShell};
-    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+    use qt_therapy_msgs::topics::SEQUENCE_RESULT;
 
     let dir = tempfile::tempdir().expect("temp dir");
     let q_tables = dir.path().join("q_tables");
@@ -707,18 +695,8 @@ fn per_user_inside_the_namespace() {
         .build()
         .expect("runtime");
     runtime.block_on(async {
-        let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
-                .expect("probe node");
-        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let (mut shell, decide) = probe_with_client(&probe_params, &node_log).await;
         let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
-        assert!(
-            shell
-                .wait_for_service(&decide, Duration::from_secs(30))
-                .await,
-            "no DecideAction server:\n{}",
-            node_log()
-        );
         let start = BehaviourState::from_state(State::START);
         let r = decide
             .call(request(0, 1, start), Duration::from_secs(10))
@@ -812,8 +790,7 @@ fn per_user_inside_the_namespace() {
 fn child_belief_inside_the_namespace() {
     use behaviour_policy::child_beliefs::{BELIEF_FILE, BeliefFile, BeliefSettings, ChildBeliefs};
     use child_belief::prior_file::PriorFile;
-    use node_shell::{NoParameters, NodeShell};
-    use qt_therapy_msgs::topics::{DECIDE_ACTION, SEQUENCE_RESULT};
+    use qt_therapy_msgs::topics::SEQUENCE_RESULT;
 
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let prior = root.join("nodes/behaviour_policy/models/child_belief_prior_c2.json");
@@ -844,18 +821,8 @@ fn child_belief_inside_the_namespace() {
     let (mut node, probe_params, log) = start_node(dir.path(), &q_tables, &extra);
     let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
     let first = runtime.block_on(async {
-        let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
-                .expect("probe node");
-        let decide = shell.client(DECIDE_ACTION).expect("client");
+        let (mut shell, decide) = probe_with_client(&probe_params, &node_log).await;
         let results = shell.publisher(SEQUENCE_RESULT).expect("publisher");
-        assert!(
-            shell
-                .wait_for_service(&decide, Duration::from_secs(30))
-                .await,
-            "no DecideAction server:\n{}",
-            node_log()
-        );
         let start = BehaviourState::from_state(State::START);
         let r = decide
             .call(request(0, 1, start.clone()), Duration::from_secs(10))
@@ -918,17 +885,7 @@ fn child_belief_inside_the_namespace() {
     let node_log = || std::fs::read_to_string(&log).unwrap_or_default();
     let after = BehaviourState::from_state(State::new(2, 0, 2).expect("state"));
     let second = runtime.block_on(async {
-        let (mut shell, NoParameters {}) =
-            NodeShell::start("behaviour_policy_probe", &probe_options(&probe_params))
-                .expect("probe node");
-        let decide = shell.client(DECIDE_ACTION).expect("client");
-        assert!(
-            shell
-                .wait_for_service(&decide, Duration::from_secs(30))
-                .await,
-            "no DecideAction server:\n{}",
-            node_log()
-        );
+        let (shell, decide) = probe_with_client(&probe_params, &node_log).await;
         let r = decide
             .call(
                 DecideActionRequest {
@@ -1000,4 +957,30 @@ fn child_belief_inside_the_namespace() {
          learned into belief_u1.json, and after a restart the next decision planned on it as \
          the in-process core plans; u2's damaged file named, kept aside, u2 new"
     );
+}
+
+/// A probe node with a DecideAction client, once the node's server is seen (30 s at most;
+/// else the node's log is shown).
+async fn probe_with_client(
+    probe_params: &Path,
+    node_log: &dyn Fn() -> String,
+) -> (
+    node_shell::NodeShell,
+    node_shell::ServiceClient<qt_therapy_msgs::DecideAction>,
+) {
+    use node_shell::{NoParameters, NodeShell};
+    let (mut shell, NoParameters {}) =
+        NodeShell::start("behaviour_policy_probe", &probe_options(probe_params))
+            .expect("probe node");
+    let decide = shell
+        .client(qt_therapy_msgs::topics::DECIDE_ACTION)
+        .expect("client");
+    assert!(
+        shell
+            .wait_for_service(&decide, Duration::from_secs(30))
+            .await,
+        "no DecideAction server:\n{}",
+        node_log()
+    );
+    (shell, decide)
 }
