@@ -4,7 +4,8 @@
 //! unsynced kept; every name change kept but no unsynced data; every unsynced write kept but
 //! the last torn: `power_cut::cut`), and what is left is read as a restarted suite would
 //! read it. Each cut must leave: every Q-table (the cluster's and, per-user tables on, the
-//! child's own) whole, and the session's at most one sequence behind the sequences scored;
+//! child's own) and the child's belief file whole, and the session's at most one sequence
+//! behind the sequences scored;
 //! the session file and journal readable by the game manager's recovery, damaged at most in a
 //! torn last line, holding every scored sequence but at most the one in progress; the bag
 //! readable up to its last complete chunk, a prefix of the finished bag, holding every result
@@ -53,6 +54,23 @@ fn whole_lines(bytes: &[u8]) -> usize {
 
 /// The session's learned count in a Q-table's text (0 when it has none, or none yet).
 fn learned(path: &Path, session: &str) -> Result<u8, String> {
+    // The child's belief beside the tables (`child_belief`, on in the main job): its highest
+    // observed sequence of the session, as a table's `learned` entry.
+    let belief = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.starts_with("belief_"));
+    if belief {
+        use behaviour_policy::child_beliefs::{BELIEF_FILE, BeliefFile};
+        let b: BeliefFile = BELIEF_FILE.load(path).map_err(|e| e.to_string())?;
+        return Ok(b
+            .observations
+            .iter()
+            .filter(|o| o.session_id == session)
+            .map(|o| o.sequence_index)
+            .max()
+            .unwrap_or(0));
+    }
     let t = q_learning::q_table_file::QTableFile::load(path).map_err(|e| e.to_string())?;
     Ok(t.learned.get(session).copied().unwrap_or(0))
 }
@@ -376,8 +394,9 @@ fn a_power_cut_at_any_write_of_a_session_loses_at_most_the_sequence_in_progress(
     assert_eq!(done.records.len(), 10, "the whole session");
     assert_eq!(
         done.q_tables_learning.len(),
-        2,
-        "a cluster's and the child's own Q-table learn the whole session: {:?}",
+        3,
+        "a cluster's and the child's own Q-table, and the child's belief, learn the whole \
+         session: {:?}",
         done.q_tables
     );
     let jsonl = PathBuf::from("out").join(format!("{summary}.jsonl"));

@@ -680,15 +680,43 @@ fn erase_removes_one_child_and_leaves_the_others_whole() {
     ] {
         assert_eq!(left[topic], want, "B's {topic}");
     }
-    // The compression stays, and every channel that still has messages, as declared; one
-    // whose messages all went (the user model info, logged once before B's session began)
-    // goes with them.
+    // The compression stays, and every channel that still has messages, as declared, and
+    // those empty in the source too (the recorder took every topic of the graph, some never
+    // published); one whose messages all went (the user model info, logged once before B's
+    // session began) goes with them.
     assert_eq!(bag.chunks().1.keys().collect::<Vec<_>>(), ["zstd"]);
     let topics: BTreeSet<&str> = bag.channels().map(|c| c.topic.as_str()).collect();
-    let with_messages: BTreeSet<&str> = kept.iter().map(|k| k.0.as_str()).collect();
+    let source_counts = source.counts();
+    let empty_in_source = source
+        .channels()
+        .filter(|c| source_counts.get(&c.id).copied().unwrap_or(0) == 0)
+        .map(|c| c.topic.as_str());
+    let with_messages: BTreeSet<&str> = kept
+        .iter()
+        .map(|k| k.0.as_str())
+        .chain(empty_in_source)
+        .collect();
     assert_eq!(topics, with_messages);
-    assert_eq!(source.channels().count() - topics.len(), 1);
-    assert!(!topics.contains("/qt_therapy/user_model/models"));
+    // Each channel gone had messages, all of them A's or before B's start (the user model
+    // info; A's session's ROS4HRI persons).
+    let gone: Vec<&str> = source
+        .channels()
+        .filter(|c| !topics.contains(c.topic.as_str()))
+        .inspect(|c| {
+            assert!(
+                source_counts.get(&c.id).copied().unwrap_or(0) > 0,
+                "{}",
+                c.topic
+            )
+        })
+        .map(|c| c.topic.as_str())
+        .collect();
+    assert!(gone.contains(&"/qt_therapy/user_model/models"), "{gone:?}");
+    assert!(
+        gone.iter()
+            .all(|t| *t == "/qt_therapy/user_model/models" || t.starts_with("/humans/persons/")),
+        "{gone:?}"
+    );
     for c in bag.channels() {
         let s = source.topic_channels(&c.topic)[0];
         assert_eq!(
