@@ -196,7 +196,8 @@ fn sample_bag(name: &str) -> PathBuf {
 }
 
 /// A recorded session (bags/README.md: cluster 1, 10 sequences, level 2, then 3 from the
-/// therapist's override and twice more from the policy, then 2 again). Every mark of its figure is checked against the bag's
+/// therapist's override and once more from the policy, with challenging feedback, then 2
+/// again). Every mark of its figure is checked against the bag's
 /// own messages, read here without `SessionLog`.
 #[test]
 fn the_figure_of_a_recorded_session_shows_its_answers_and_stages() {
@@ -213,7 +214,7 @@ fn the_figure_of_a_recorded_session_shows_its_answers_and_stages() {
             .all(|r| r.session_id == results[0].session_id)
     );
     let levels: Vec<u8> = results.iter().map(|r| r.level).collect();
-    assert_eq!(levels, [2, 2, 3, 3, 3, 2, 2, 2, 2, 2]);
+    assert_eq!(levels, [2, 2, 3, 3, 2, 2, 2, 2, 2, 2]);
 
     let log = SessionLog::from_bag(&reader, None).expect("decodes");
     let figures = engagement_figures(&log);
@@ -235,9 +236,9 @@ fn the_figure_of_a_recorded_session_shows_its_answers_and_stages() {
             "result {after} s after the answer"
         );
     }
-    // The stages end with sequences 2 (level 2), 5 (level 3) and 10 (level 2).
+    // The stages end with sequences 2 (level 2), 4 (level 3) and 10 (level 2).
     let end_of = |sequence: usize, length: u8| (want_answers[sequence - 1], length);
-    let want_stages = [end_of(2, 5), end_of(5, 7), end_of(10, 5)];
+    let want_stages = [end_of(2, 5), end_of(4, 7), end_of(10, 5)];
     assert_eq!(figure.stage_ends, want_stages);
     // The curve: the bag's seconds in the session's span, those with a face at their value.
     let first = stamp_ns(&log.states[0].header);
