@@ -24,6 +24,8 @@ const MAX_TEXT_BYTES: u64 = 64 << 20;
 pub enum ItemKind {
     SessionFile,
     UserQTable,
+    /// The behaviour policy's belief about this child (`belief_<id>.json`, `child_belief`).
+    UserBelief,
     Bag,
     InteractionCsv,
     Report,
@@ -38,6 +40,7 @@ impl ItemKind {
         match self {
             ItemKind::SessionFile => "session file",
             ItemKind::UserQTable => "Q-table",
+            ItemKind::UserBelief => "belief about the child",
             ItemKind::Bag => "bag",
             ItemKind::InteractionCsv => "interaction CSV",
             ItemKind::Report => "session report",
@@ -441,6 +444,20 @@ impl Inventory {
                 }
                 true
             }
+            Some("qt_therapy child_belief") => {
+                if value.get("user_id").and_then(|u| u.as_str()) == Some(user) {
+                    self.push(
+                        Some(f),
+                        ItemKind::UserBelief,
+                        "the behaviour policy's belief about this user (every sequence of theirs \
+                         it learned from: level, feedback, score, answer right or wrong, \
+                         engagement, and the session ids)"
+                            .into(),
+                        Content::Whole,
+                    );
+                }
+                true
+            }
             Some("qt_therapy user models") => {
                 let points = value.get("users").and_then(|u| u.as_array());
                 let point = points.and_then(|p| {
@@ -601,12 +618,15 @@ impl Inventory {
     }
 
     /// Files erase would change in a run that is still going block it. The Q-table directory
-    /// is always held by the running behaviour policy, which opens a user's table only when
-    /// that user plays; with every run holding the user's data ended, it has not opened it.
+    /// is always held by the running behaviour policy, which opens a user's table and belief
+    /// only when that user plays; with every run holding the user's data ended, it has not
+    /// opened them.
     fn live_checks(&mut self, processes: &Processes) {
         let mut runs: BTreeMap<PathBuf, (Vec<LiveBy>, Vec<PathBuf>)> = BTreeMap::new();
         for item in &self.items {
-            if item.erase_action() == EraseAction::Leave || item.kind == ItemKind::UserQTable {
+            if item.erase_action() == EraseAction::Leave
+                || matches!(item.kind, ItemKind::UserQTable | ItemKind::UserBelief)
+            {
                 continue;
             }
             let run = run_dir(&item.path);

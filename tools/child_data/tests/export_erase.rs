@@ -15,7 +15,8 @@
 //!   tablet bridge's (`nodes/tablet_bridge/src/bridge.rs`).
 //! - Reports by the `session_report` library, the CSV by `user_models` from the bags, the
 //!   model file by `user_models::fit` (one simulated user renamed to sim-child-1), the
-//!   Q-tables from `bags/q_tables` with their owner set.
+//!   Q-tables from `bags/q_tables` with their owner set, a belief file per child as the
+//!   behaviour policy writes it.
 //!
 //! Where the bag check's Python readers are installed (`tests/run.sh` makes the venv), every
 //! bag this tool writes is checked in them too.
@@ -324,6 +325,18 @@ fn build_fixture() -> (Fixture, [String; 3]) {
             &[(s, 10)],
             &q.join(format!("user_{u}.json")),
         );
+        // The behaviour policy's belief about the child (`child_belief`), as the node writes
+        // it (nodes/behaviour_policy/src/child_beliefs.rs).
+        let belief = serde_json::json!({
+            "format": "qt_therapy child_belief", "version": 1, "user_id": u, "prior_cluster": 0,
+            "observations": [{"session_id": s, "sequence_index": 1, "level": 2, "feedback": 0,
+                "previous_score": 0, "outcome": 1, "engagement": 0.5}],
+        });
+        std::fs::write(
+            q.join(format!("belief_{u}.json")),
+            serde_json::to_string_pretty(&belief).expect("JSON"),
+        )
+        .expect("writes a belief");
     }
     let records =
         user_models::data::bag::read_bags(&[sample(SAMPLE_A), sample(SAMPLE_B), sample(SAMPLE_C)])
@@ -472,6 +485,7 @@ fn export_holds_everything_of_one_child_and_nothing_of_the_others() {
         format!("{RUN1}/{sa}.summary.json"),
         format!("{RUN1}/report-{sa}.html"),
         format!("q_tables/user_{A}.json"),
+        format!("q_tables/belief_{A}.json"),
     ] {
         assert_eq!(get(&rel), before[&f.data().join(&rel)].as_slice(), "{rel}");
     }
@@ -589,6 +603,7 @@ fn erase_removes_one_child_and_leaves_the_others_whole() {
         f.run1().join(format!("{sa}.summary.json")),
         f.run1().join(format!("report-{sa}.html")),
         f.data().join(format!("q_tables/user_{A}.json")),
+        f.data().join(format!("q_tables/belief_{A}.json")),
     ];
     expected_gone.sort();
     assert_eq!(gone, expected_gone);
